@@ -1,0 +1,13 @@
+"""Float64 by default.
+
+Importing :mod:`tension_zones` turns on ``jax_enable_x64`` (analysis wants float64: pinv, small
+singular values and 1e-9 agreement need it). Set ``TENSION_ZONES_X64=0`` in the environment before
+importing to leave JAX's setting alone; float32 designs (``Design.astype(jnp.float32)``) work either way.
+"""
+
+import os
+
+import jax
+
+if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
+    jax.config.update("jax_enable_x64", True)

@@ -1,0 +1,118 @@
+"""Private numerical helpers shared by every module.
+
+* Even functions with removable singularities at 0 (``sin x / x`` and friends), written as functions
+  of ``x**2`` so that they stay smooth where ``|x|`` is not, evaluated by a Taylor series near 0 and
+  the closed form elsewhere, with the double-``where`` trick so that neither branch can leak a NaN
+  into values or gradients.
+* The one straight-through helper of the package.
+* A pseudo-inverse for tall ``(n, 2)`` matrices, exact and differentiable, with an exact zero
+  determinant when fewer than two rows are active (see :func:`pinv_tall2`).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def float_dtype(*xs):
+    """The floating dtype the inputs promote to (float64 when x64 is on and nothing says otherwise)."""
+    return jnp.result_type(*xs, float)
+
+
+def eps_of(x) -> float:
+    return float(jnp.finfo(float_dtype(x)).eps)
+
+
+def _series_threshold(x2) -> float:
+    # Balance the closed form's cancellation error (~eps / x^2) against the truncation error of a
+    # series kept to x^8 (~1e-8 x^10): float64 -> |x| < 0.23, float32 -> |x| < 1.2.
+    return (eps_of(x2) * 1e8) ** (1.0 / 6.0)
+
+
+def _even_fn(x2, closed, coeffs):
+    """f(x) for an even f given x2 = x**2: series sum(c_k x2^k) near 0, `closed(x)` elsewhere."""
+    x2 = jnp.asarray(x2, float_dtype(x2))
+    small = x2 < _series_threshold(x2)
+    x2_safe = jnp.where(small, jnp.ones_like(x2), x2)  # double-where: the unused branch stays finite
+    big = closed(jnp.sqrt(x2_safe))
+    series = jnp.polyval(jnp.asarray(coeffs[::-1], x2.dtype), x2)
+    return jnp.where(small, series, big)
+
+
+def sinc_sq(x2):
+    """sin(x)/x as a function of x2 = x**2."""
+    return _even_fn(x2, lambda x: jnp.sin(x) / x, [1.0, -1 / 6, 1 / 120, -1 / 5040, 1 / 362880])
+
+
+def versinc_sq(x2):
+    """(1 - cos x)/x**2 as a function of x2 = x**2."""
+    return _even_fn(
+        x2,
+        lambda x: (1.0 - jnp.cos(x)) / x**2,
+        [1 / 2, -1 / 24, 1 / 720, -1 / 40320, 1 / 3628800],
+    )
+
+
+def cubic_sq(x2):
+    """(x cos x - sin x)/x**3 as a function of x2 = x**2."""
+    return _even_fn(
+        x2,
+        lambda x: (x * jnp.cos(x) - jnp.sin(x)) / x**3,
+        [-1 / 3, 1 / 30, -1 / 840, 1 / 45360, -1 / 3991680],
+    )
+
+
+def straight_through(hard, soft):
+    """Forward value exactly ``hard``; gradient that of ``soft``.
+
+    Written as ``hard + (soft - stop_gradient(soft))`` rather than ``soft + stop_gradient(hard - soft)``
+    so that the forward value is bit-for-bit the hard value (``x - x == 0`` exactly).
+    """
+    hard = jax.lax.stop_gradient(jnp.asarray(hard, soft.dtype))
+    return hard + (soft - jax.lax.stop_gradient(soft))
+
+
+def skew(w):
+    """(3,) -> (3, 3) cross-product matrix."""
+    z = jnp.zeros_like(w[0])
+    return jnp.array([[z, -w[2], w[1]], [w[2], z, -w[0]], [-w[1], w[0], z]])
+
+
+def vee(S):
+    """(3, 3) skew part -> (3,), inverse of :func:`skew` (antisymmetrised)."""
+    return 0.5 * jnp.array([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]])
+
+
+def rotvec_to_matrix(w):
+    """Rodrigues' formula, smooth at w = 0."""
+    t2 = jnp.dot(w, w)
+    K = skew(w)
+    return jnp.eye(3, dtype=K.dtype) + sinc_sq(t2) * K + versinc_sq(t2) * (K @ K)
+
+
+def pinv_tall2(J):
+    """Moore-Penrose pseudo-inverse of an ``(n, 2)`` matrix, ``(2, n)``.
+
+    ``pinv(J) = pinv(G) J^T`` with the 2x2 Gram matrix ``G = J^T J``. Its determinant is taken by
+    Cauchy-Binet as the sum of squared 2x2 row minors, so it is exactly zero when fewer than two rows
+    are non-zero (one taut wire) and accurate when small. Rank 2 when ``det > rcond^2 tr(G)^2`` with
+    NumPy's default ``rcond = max(n, 2) * eps`` on singular values; rank 1 uses
+    ``pinv(G) = G / tr(G)^2``; rank 0 gives zeros. Both branches are guarded (double ``where``).
+    """
+    n = J.shape[0]
+    G = J.T @ J
+    i, j = jnp.triu_indices(n, k=1)
+    minors = J[i, 0] * J[j, 1] - J[i, 1] * J[j, 0]
+    det = jnp.sum(minors**2)
+    tr = G[0, 0] + G[1, 1]
+    rcond = max(n, 2) * eps_of(J)
+    rank2 = det > (rcond * tr) ** 2
+    rank_pos = tr > 0
+    det_safe = jnp.where(rank2, det, 1.0)
+    tr_safe = jnp.where(rank_pos, tr, 1.0)
+    adj = jnp.array([[G[1, 1], -G[0, 1]], [-G[1, 0], G[0, 0]]])
+    G_pinv = jnp.where(
+        rank2, adj / det_safe, jnp.where(rank_pos, G / tr_safe**2, jnp.zeros_like(G))
+    )
+    return G_pinv @ J.T

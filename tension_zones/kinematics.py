@@ -1,0 +1,187 @@
+"""Constant-curvature kinematics of one segment (MODEL.md Sec. 1 and 5; paper Sec. 2).
+
+Every function here is written for **one pose** and is pure, so it can be ``jit``-ed, ``vmap``-ed
+over a grid (:func:`over_grid`) and differentiated. Frames: everything is expressed in the base
+frame {B}; twists are ``[p_dot; omega]`` with ``omega = vee(R_dot R^T)``.
+
+Configuration ``psi = [theta_L, delta]`` (rad): ``theta_0 = pi/2`` is straight, the bending angle is
+``phi = theta_0 - theta_L`` and the segment bends toward ``sigma = -delta``. The singularity-free
+bending vector is ``b = (u, v) = phi (cos sigma, sin sigma)``.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from ._numerics import cubic_sq, float_dtype, pinv_tall2, rotvec_to_matrix, sinc_sq, versinc_sq
+from .design import Design
+
+THETA_0 = jnp.pi / 2
+
+
+def _as_float(design: Design, *xs):
+    dt = float_dtype(design.length, *xs)
+    return tuple(jnp.asarray(x, dt) for x in xs)
+
+
+# --------------------------------------------------------------------------------------------
+# Coordinates
+# --------------------------------------------------------------------------------------------
+def psi_to_b(theta_L, delta):
+    """``(theta_L, delta)`` -> bending vector ``b = phi (cos delta, -sin delta)``, shape (2,)."""
+    phi = THETA_0 - theta_L
+    return jnp.stack([phi * jnp.cos(delta), -phi * jnp.sin(delta)])
+
+
+def b_to_psi(b):
+    """Bending vector (2,) -> ``(theta_L, delta)`` with ``phi >= 0`` and ``delta`` in (-pi, pi].
+
+    ``delta`` is undefined at ``b = 0``; it is returned as 0 there, with zero gradient.
+    """
+    u, v = b[0], b[1]
+    phi2 = u * u + v * v
+    nz = phi2 > 0
+    phi = jnp.sqrt(jnp.where(nz, phi2, 1.0))
+    phi = jnp.where(nz, phi, 0.0)
+    delta = jnp.where(nz, jnp.arctan2(-v, jnp.where(nz, u, 1.0)), 0.0)
+    return THETA_0 - phi, delta
+
+
+# --------------------------------------------------------------------------------------------
+# Pose in psi coordinates
+# --------------------------------------------------------------------------------------------
+def tip_pose(design: Design, theta_L, delta):
+    """Tip position ``p`` (3,) in mm and orientation ``R`` (3, 3) in {B} (MODEL.md Sec. 1).
+
+    ``p = (L / phi) [cos d (1 - cos phi), -sin d (1 - cos phi), sin phi]``,
+    ``R = Rz(-d) Ry(phi) Rz(d)``; smooth through the straight pose.
+    """
+    theta_L, delta = _as_float(design, theta_L, delta)
+    return tip_pose_b(design, psi_to_b(theta_L, delta))
+
+
+def wire_lengths(design: Design, theta_L, delta):
+    """Wire lengths ``l_k = L + r cos(delta_k) (theta_L - theta_0)`` (n,), mm (paper Eq. 8)."""
+    theta_L, delta = _as_float(design, theta_L, delta)
+    delta_k = delta + design.wire_angles
+    return design.length + design.pitch_radius * jnp.cos(delta_k) * (theta_L - THETA_0)
+
+
+def J_xpsi(design: Design, theta_L, delta):
+    """Analytic twist Jacobian ``xi = J_xpsi psi_dot``, (6, 2) (MODEL.md Sec. 1; paper Eq. 7).
+
+    The ratios ``A/T^2``, ``(s - 1)/T`` and ``(T s + c)/T^2`` (``T = theta_L - theta_0``) are
+    evaluated by series near ``T = 0`` so values and gradients are finite at the straight pose.
+    """
+    theta_L, delta = _as_float(design, theta_L, delta)
+    L = design.length
+    T = theta_L - THETA_0
+    T2 = T * T
+    c = jnp.cos(theta_L)
+    sd, cd = jnp.sin(delta), jnp.cos(delta)
+    # With s = cos T and c = -sin T:  A/T^2 = (1 - cos T)/T^2 - sin T/T,
+    # (s - 1)/T = -T (1 - cos T)/T^2,  (T s + c)/T^2 = T (T cos T - sin T)/T^3.
+    a_over_T2 = versinc_sq(T2) - sinc_sq(T2)
+    s1_over_T = -T * versinc_sq(T2)
+    z_term = T * cubic_sq(T2)
+    z = jnp.zeros_like(T)
+    Jv = L * jnp.array(
+        [
+            [cd * a_over_T2, -sd * s1_over_T],
+            [-sd * a_over_T2, -cd * s1_over_T],
+            [z_term, z],
+        ]
+    )
+    s = jnp.sin(theta_L)
+    Jw = jnp.array([[-sd, cd * c], [-cd, -sd * c], [z, -1.0 + s]])
+    return jnp.concatenate([Jv, Jw], axis=0)
+
+
+def J_qpsi(design: Design, theta_L, delta):
+    """Joint Jacobian ``q_dot = J_qpsi psi_dot``, (n, 2); row k = ``r [cos d_k, -(theta_L - theta_0) sin d_k]``."""
+    theta_L, delta = _as_float(design, theta_L, delta)
+    delta_k = delta + design.wire_angles
+    T = theta_L - THETA_0
+    r = design.pitch_radius
+    return jnp.stack([r * jnp.cos(delta_k), -r * T * jnp.sin(delta_k)], axis=1)
+
+
+def jacobians(design: Design, theta_L, delta):
+    """``(J_xpsi (6, 2), J_qpsi (n, 2))`` at one pose."""
+    return J_xpsi(design, theta_L, delta), J_qpsi(design, theta_L, delta)
+
+
+def J_xq(design: Design, theta_L, delta, mask=None):
+    """Joint-to-task Jacobian ``J_xpsi pinv(J_qpsi)``, (6, n) (paper Eq. 12).
+
+    ``mask`` (n,) of 0/1 keeps only the rows of the taut wires (the reduced Jacobian, paper
+    Sec. 3.3); the columns of slack wires are then zero. ``None`` = all wires (push-pull).
+    """
+    Jx, Jq = jacobians(design, theta_L, delta)
+    if mask is not None:
+        Jq = Jq * jnp.asarray(mask, Jq.dtype)[:, None]
+    return Jx @ pinv_tall2(Jq)
+
+
+# --------------------------------------------------------------------------------------------
+# Bending-vector coordinates (MODEL.md Sec. 5)
+# --------------------------------------------------------------------------------------------
+def tip_pose_b(design: Design, b):
+    """Tip position (3,) and orientation (3, 3) from the bending vector ``b = (u, v)`` (rad).
+
+    ``p = [L (1 - cos phi)/phi^2 u, L (1 - cos phi)/phi^2 v, L sin(phi)/phi]``, ``phi = |b|``;
+    rotation vector ``(-v, u, 0)``. Smooth at ``b = 0``.
+    """
+    (b,) = _as_float(design, b)
+    u, v = b[0], b[1]
+    phi2 = u * u + v * v
+    L = design.length
+    k = L * versinc_sq(phi2)
+    p = jnp.stack([k * u, k * v, L * sinc_sq(phi2)])
+    R = rotvec_to_matrix(jnp.stack([-v, u, jnp.zeros_like(u)]))
+    return p, R
+
+
+def wire_lengths_b(design: Design, b):
+    """``l_k = L - r (u cos alpha_k + v sin alpha_k)`` (n,), mm: linear in ``b``."""
+    (b,) = _as_float(design, b)
+    return design.length - design.pitch_radius * (
+        b[0] * jnp.cos(design.wire_angles) + b[1] * jnp.sin(design.wire_angles)
+    )
+
+
+def J_qb(design: Design, b=None):
+    """``q_dot = J_qb b_dot``, (n, 2): the constant ``-r [cos alpha_k, sin alpha_k]``."""
+    a = design.wire_angles
+    return -design.pitch_radius * jnp.stack([jnp.cos(a), jnp.sin(a)], axis=1)
+
+
+def J_xb(design: Design, b):
+    """Twist Jacobian in bending-vector coordinates, (6, 2): ``[p_dot; omega] = J_xb b_dot``."""
+    (b,) = _as_float(design, b)
+
+    p_of = lambda bb: tip_pose_b(design, bb)[0]  # noqa: E731
+    R_of = lambda bb: tip_pose_b(design, bb)[1]  # noqa: E731
+    dp = jax.jacfwd(p_of)(b)  # (3, 2)
+    dR = jax.jacfwd(R_of)(b)  # (3, 3, 2)
+    W = jnp.einsum("ijk,lj->kil", dR, R_of(b))  # R_dot R^T per column, (2, 3, 3)
+    omega = jnp.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=0)  # (3, 2)
+    return jnp.concatenate([dp, omega], axis=0)
+
+
+# --------------------------------------------------------------------------------------------
+# Grids
+# --------------------------------------------------------------------------------------------
+def over_grid(fn):
+    """Lift a single-pose ``fn(design, theta_L, delta, *args)`` to a ``(n_theta, n_delta)`` grid.
+
+    Returns ``g(design, theta_L (n_theta,), delta (n_delta,), *args)``; every output gets the two
+    leading grid axes. ``args`` are shared by all poses.
+    """
+
+    def g(design, theta_L, delta, *args):
+        inner = jax.vmap(lambda t, d: fn(design, t, d, *args), in_axes=(None, 0))
+        return jax.vmap(inner, in_axes=(0, None))(jnp.asarray(theta_L), jnp.asarray(delta))
+
+    return g

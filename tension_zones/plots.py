@@ -1,0 +1,96 @@
+"""Figures. Matplotlib only, Agg backend by default; every function takes an optional ``ax``."""
+
+from __future__ import annotations
+
+import matplotlib
+
+if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+    try:  # headless by default; notebooks keep their inline backend
+        import IPython  # noqa: F401
+
+        if IPython.get_ipython() is None:
+            matplotlib.use("Agg")
+    except ImportError:
+        matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Wedge
+
+from .zones import TensionMap
+
+_COUNT_COLOURS = {0: "#d62728", 1: "#fdd49e", 2: "#9ecae1", 3: "#74c476", 4: "#31a354"}
+
+
+def _wire_colour(k: int, n: int):
+    return plt.get_cmap("tab10" if n <= 10 else "tab20")(k % (10 if n <= 10 else 20))
+
+
+def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
+    """Draw a tension map in the paper's style (Figs. 2, 5, 7).
+
+    The inner disk is split into the sectors of constant taut set, shaded by the number of taut
+    wires and labelled with the wires; each wire's 180 deg zone is an offset ring outside it (wire 1
+    innermost). Angles are the bending-plane angle ``delta`` (deg), counter-clockwise from x.
+    Point sectors (a single direction with fewer taut wires) are drawn as dashed rays.
+    """
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6.4, 6.4))
+    n = tmap.n_wires
+    ring0, ring_w = 1.08, 0.09
+    sectors = list(tmap.sectors)
+    first, last = sectors[0], sectors[-1]
+    if len(sectors) > 1 and first.width_deg > 0 and last.width_deg > 0 and first.wires == last.wires:
+        # the table splits the sector through 0 deg; draw it whole
+        sectors = [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
+    for s in sectors:
+        if s.width_deg > 0:
+            colour = _COUNT_COLOURS.get(s.n_taut, "#006d2c")
+            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg, fc=colour, ec="white", lw=1.0))
+            mid = np.radians(0.5 * (s.start_deg + s.end_deg))
+            rad = 0.62 if s.width_deg > 25 else 0.8
+            label = ",".join(map(str, s.wires)) or "none"
+            ax.text(rad * np.cos(mid), rad * np.sin(mid), label, ha="center", va="center", fontsize=9)
+        else:
+            a = np.radians(s.start_deg)
+            ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2)
+            ax.text(1.0 * np.cos(a) * 0.45, 1.0 * np.sin(a) * 0.45, f"{s.n_taut}",
+                    fontsize=8, ha="center", va="center",
+                    bbox=dict(boxstyle="circle,pad=0.15", fc="white", ec="k", lw=0.6))
+    for k, (a, b) in enumerate(tmap.zones_deg):
+        r_out = ring0 + (k + 1) * ring_w
+        ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n),
+                           ec="none", alpha=0.85))
+        mid = np.radians(0.5 * (a + b))
+        ax.text((r_out - 0.04) * np.cos(mid), (r_out - 0.04) * np.sin(mid), str(k + 1),
+                ha="center", va="center", fontsize=7, color="white", fontweight="bold")
+    r_max = ring0 + (n + 1) * ring_w
+    for deg in range(0, 360, 30):
+        a = np.radians(deg)
+        ax.plot([r_max * np.cos(a), (r_max + 0.04) * np.cos(a)],
+                [r_max * np.sin(a), (r_max + 0.04) * np.sin(a)], color="0.3", lw=0.8)
+        ax.text((r_max + 0.13) * np.cos(a), (r_max + 0.13) * np.sin(a), f"{deg}°",
+                ha="center", va="center", fontsize=8, color="0.3")
+    ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
+    handles = [plt.Rectangle((0, 0), 1, 1, fc=c) for c in
+               [_COUNT_COLOURS[k] for k in sorted({s.n_taut for s in tmap.sectors
+                                                   if s.width_deg > 0 and s.n_taut <= 4})]]
+    labels = [f"{k} taut" for k in sorted({s.n_taut for s in tmap.sectors
+                                           if s.width_deg > 0 and s.n_taut <= 4})]
+    if any(s.width_deg == 0 for s in sectors):
+        handles.append(plt.Line2D([], [], ls="--", color="k"))
+        labels.append("single direction (circled: taut count)")
+    ax.legend(handles, labels, loc="lower left", fontsize=8, frameon=False,
+              bbox_to_anchor=(-0.05, -0.08))
+    lim = r_max + 0.3
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    if title is None:
+        title = f"Tension map, {n} wires"
+        if tmap.phase_deg:
+            title += f" (zones shifted {tmap.phase_deg:.1f}° by δ̇)"
+    ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone",
+                 fontsize=10)
+    return ax

@@ -1,0 +1,64 @@
+"""``tension-zones reproduce``: the paper's figures and tables, one command.
+
+Each section of the paper adds its own step to :data:`STEPS`; a step takes the output folder and the
+summary dictionary (written to ``summary.json`` at the end) and returns the files it wrote.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
+    """Paper Figs. 5 and 7: the three- and four-wire tension maps, with their sector tables."""
+    import matplotlib.pyplot as plt
+
+    from .design import Design
+    from .plots import plot_tension_map
+    from .zones import tension_map
+
+    written = []
+    tables = {}
+    for n, fig_no in ((3, 5), (4, 7)):
+        tmap = tension_map(Design(n, 20.0, 2.0))
+        fig, ax = plt.subplots(figsize=(6.4, 6.8))
+        plot_tension_map(tmap, ax=ax, title=f"Fig. {fig_no}: tension map, {n} wires")
+        path = out / f"fig{fig_no}_tension_map_{n}w.png"
+        fig.savefig(path, dpi=130, bbox_inches="tight")
+        plt.close(fig)
+        written.append(path)
+        tables[str(n)] = [
+            {"delta_deg": str(s), "wires": list(s.wires)} for s in tmap.sectors
+        ]
+    # one taut wire fraction of directions, the figure a designer reads off Figs. 5 and 7
+    summary["tension_maps"] = {
+        "sectors": tables,
+        "one_taut_wire_fraction": {
+            str(n): float(np.mean([len(tension_map(Design(n, 20.0, 2.0)).taut_at(d)) == 1
+                                   for d in np.arange(0.0, 360.0, 0.25)]))
+            for n in (3, 4)
+        },
+    }
+    return written
+
+
+STEPS = [("tension maps (Figs. 5, 7)", _tension_maps)]
+
+
+def reproduce(out: Path, quiet: bool = False) -> dict:
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    summary: dict = {}
+    for name, step in STEPS:
+        if not quiet:
+            print(f"[reproduce] {name} ...", flush=True)
+        for path in step(out, summary, quiet):
+            if not quiet:
+                print(f"  wrote {path}")
+    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    if not quiet:
+        print(f"  wrote {out / 'summary.json'}")
+    return summary

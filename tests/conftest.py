@@ -1,0 +1,37 @@
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import jax  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import tension_zones as tz  # noqa: E402  (enables float64)
+
+from hypothesis import settings  # noqa: E402
+
+settings.register_profile("ci", max_examples=40, deadline=None)
+settings.load_profile("ci")
+
+
+@pytest.fixture
+def d3():
+    return tz.Design(3, 20.0, 2.0)
+
+
+@pytest.fixture
+def d4():
+    return tz.Design(4, 20.0, 2.0)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(0)
+
+
+def omega_jacobian(fn_R, x):
+    """Columns vee(dR/dx_i R^T) for a rotation-valued fn of a vector x."""
+    R = fn_R(x)
+    dR = jax.jacfwd(fn_R)(x)
+    W = np.einsum("ijk,lj->kil", np.asarray(dR), np.asarray(R))
+    return np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=0)

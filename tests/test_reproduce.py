@@ -1,0 +1,27 @@
+"""`tension-zones reproduce` end to end, and the README's two set-up commands."""
+
+import json
+import pathlib
+
+from tension_zones.cli import main
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+
+
+def test_readme_has_exactly_the_two_setup_commands():
+    text = (ROOT / "README.md").read_text()
+    assert text.count("<!-- main-command -->") == 1 and text.count("<!-- test-command -->") == 1
+    lines = text.splitlines()
+    main_cmd = lines[lines.index("<!-- main-command -->") + 2]
+    test_cmd = lines[lines.index("<!-- test-command -->") + 2]
+    assert "pip install" in main_cmd and "tension-zones reproduce" in main_cmd
+    assert "pip install" in test_cmd and "pytest" in test_cmd
+    assert "test-command" in (ROOT / ".ci" / "run").read_text()
+
+
+def test_reproduce_writes_figures_and_summary(tmp_path):
+    assert main(["reproduce", "--out", str(tmp_path), "--quiet"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["tension_maps"]["one_taut_wire_fraction"]["3"] > 0.45
+    assert summary["tension_maps"]["one_taut_wire_fraction"]["4"] < 0.02
+    assert (tmp_path / "fig5_tension_map_3w.png").stat().st_size > 10_000
