@@ -1,0 +1,346 @@
+"""Design optimiser (issue 5): wire count, pitch radius, wire stiffness and wire placement.
+
+Objective for one wire count ``n`` (all terms over the scenario's task grid of poses):
+
+    w_p * max dp_max_reduced  +  w_d * max |dx|_reduced  +  w_n * n
+
+with ``dp_max_reduced`` the reduced-Jacobian position-uncertainty bound (paper Sec. 4, Eq. 19) and
+``|dx|_reduced`` the reduced compliance deflection under the scenario's load (paper Sec. 5).
+
+**Controllability is a constraint.** The pinv-based bound rewards slack wires (a direction nobody
+actuates drops out of ``pinv``), so a design is feasible only if at every task pose the taut wires
+span the configuration space: ``spread >= min_spread`` where ``spread`` is the smallest singular
+value of the taut wires' unit vectors ``[cos delta_k, sin delta_k]``. It enters the optimisation
+as a quadratic penalty through the straight-through tension masks, and violations are reported.
+
+Variables are unconstrained and mapped onto the feasible set exactly (reparametrisation): the pitch
+radius and wire stiffness through a sigmoid between their bounds (the bounds already include the
+outer-diameter and wire-gap limits), free wire angles as a start angle plus gaps that are each at
+least the minimum angular separation (softmax of the slack), inside the allowed arc when a tool
+channel forbids part of the circle. Gradients: Adam (optax) on a log-sum-exp surrogate of each
+worst case whose sharpness rises geometrically over the run (continuation); the **exact** maximum
+is what is reported, and the best exact objective seen is kept. Several random starts run together
+(``vmap``); each wire count is optimised and the best count reported.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+import time
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from .design import Design
+from .scenario import Scenario
+from .zones import tension_mask
+
+#: Penalty weight on the mean squared controllability violation (objective units per unit^2).
+SPREAD_PENALTY = 1e3
+
+
+# ---------------------------------------------------------------------------------------------
+# Parametrisation: unconstrained z -> a Design that satisfies every geometric constraint
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _Bounds:
+    """Numbers of one wire count's search space (a pytree of arrays: new values never recompile)."""
+
+    r_lo: jax.Array
+    r_hi: jax.Array
+    k_lo: jax.Array
+    k_hi: jax.Array
+    sep: jax.Array  # wire diameter + gap (mm): chord between neighbouring wire centres >= sep
+    clear: jax.Array  # wire radius + gap (mm): chord from a wire centre to a forbidden arc >= clear
+    arc_start: jax.Array  # allowed arc (rad): [arc_start, arc_start + arc_len]
+    arc_len: jax.Array
+
+
+jax.tree_util.register_dataclass(
+    _Bounds, data_fields=[f.name for f in dataclasses.fields(_Bounds)], meta_fields=[]
+)
+
+
+def _min_angle(chord, r):
+    """Smallest angle between two points on a circle of radius r whose chord is at least `chord`."""
+    return 2.0 * jnp.arcsin(jnp.clip(chord / (2.0 * r), 0.0, 1.0))
+
+
+def _angles(z_a0, z_gaps, r, b: _Bounds, n: int, free: bool, arc: bool):
+    """Wire angles (n,) from unconstrained variables; every gap >= the minimum separation."""
+    if not free:
+        return jnp.arange(n) * (2.0 * jnp.pi / n)
+    s_min = _min_angle(b.sep, r)
+    if not arc:
+        # n gaps around the full circle, each s_min + a share of the slack
+        gaps = s_min + (2.0 * jnp.pi - n * s_min) * jax.nn.softmax(z_gaps[:n])
+        return z_a0 + jnp.concatenate([jnp.zeros(1), jnp.cumsum(gaps[:-1])])
+    # inside the allowed arc: end clearance h at both ends, n - 1 inner gaps >= s_min
+    h = _min_angle(2.0 * b.clear, r) / 2.0
+    slack = b.arc_len - 2.0 * h - (n - 1) * s_min
+    parts = slack * jax.nn.softmax(z_gaps)  # n + 1 parts: before, between, after
+    steps = jnp.concatenate([b.arc_start + h + parts[:1], s_min + parts[1:n]])
+    return jnp.cumsum(steps)
+
+
+def _design(z, b: _Bounds, n: int, free: bool, arc: bool, base: Design) -> Design:
+    r = b.r_lo + (b.r_hi - b.r_lo) * jax.nn.sigmoid(z["r"])
+    k = b.k_lo + (b.k_hi - b.k_lo) * jax.nn.sigmoid(z["k"])
+    angles = _angles(z["a0"], z["gaps"], r, b, n, free, arc)
+    return base.replace(pitch_radius=r, wire_stiffness=k, wire_angles=angles)
+
+
+# ---------------------------------------------------------------------------------------------
+# Controllability
+# ---------------------------------------------------------------------------------------------
+def spread(design: Design, delta):
+    """Smallest singular value of the taut wires' unit vectors ``[cos d_k, sin d_k]`` at ``delta``.
+
+    0 with one taut wire (or none); 1/sqrt(2)*... grows as the taut wires spread out. Uses the
+    straight-through tension mask, so it has a gradient w.r.t. the wire angles.
+    """
+    dk = delta + design.wire_angles
+    m = tension_mask(design, delta)
+    c, s = jnp.cos(dk), jnp.sin(dk)
+    half_tr = 0.5 * jnp.sum(m * (c * c + s * s))
+    # det of the 2x2 Gram by Cauchy-Binet: exactly 0 with fewer than two taut wires
+    i, j = jnp.triu_indices(design.n_wires, k=1)
+    det = jnp.sum(m[i] * m[j] * (c[i] * s[j] - s[i] * c[j]) ** 2)
+    # (tr/2)^2 - det written as a sum of squares, accurate near a double eigenvalue
+    disc = (0.5 * jnp.sum(m * jnp.cos(2 * dk))) ** 2 + (0.5 * jnp.sum(m * jnp.sin(2 * dk))) ** 2
+    root = jnp.sqrt(jnp.where(disc > 0, disc, 1.0)) * (disc > 0)
+    big = half_tr + root  # larger eigenvalue; the smaller one is det / big (no cancellation)
+    lam_min = jnp.where(big > 0, det / jnp.where(big > 0, big, 1.0), 0.0)
+    return jnp.sqrt(jnp.where(lam_min > 0, lam_min, 1.0)) * (lam_min > 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# Objective
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _Task:
+    """The scenario's numbers as arrays (a pytree: new values of the same shapes never recompile)."""
+
+    theta_L: jax.Array  # (n_theta,)
+    delta: jax.Array  # (n_delta,)
+    dq: jax.Array
+    load: jax.Array  # (3,)
+    w_position: jax.Array
+    w_deflection: jax.Array
+    w_wires: jax.Array
+    min_spread: jax.Array
+
+
+jax.tree_util.register_dataclass(
+    _Task, data_fields=[f.name for f in dataclasses.fields(_Task)], meta_fields=[]
+)
+
+
+def _pose_terms(design: Design, theta_L, delta, task: _Task):
+    """(position-uncertainty bound dp_max (mm), reduced deflection (mm)) at one pose."""
+    from .metrics import pose_measures
+    from .statics import pose_deflection
+
+    mask = tension_mask(design, delta)
+    dp = pose_measures(design, theta_L, delta, task.dq, mask=mask)["dp_max"]
+    defl = pose_deflection(design, theta_L, delta, task.load)
+    return dp, defl
+
+
+def _grid_terms(design: Design, task: _Task):
+    """Per-pose terms on the task grid, each (n_theta, n_delta), and the spread per delta."""
+    inner = jax.vmap(lambda t, d: _pose_terms(design, t, d, task), in_axes=(None, 0))
+    dp, defl = jax.vmap(inner, in_axes=(0, None))(task.theta_L, task.delta)
+    spr = jax.vmap(lambda d: spread(design, d))(task.delta)
+    return dp, defl, spr
+
+
+def _smooth_max(x, sharpness):
+    """Log-sum-exp upper bound of max(x), relative temperature max|x| / sharpness."""
+    x = x.ravel()
+    m = jax.lax.stop_gradient(jnp.max(x))
+    t = jax.lax.stop_gradient(jnp.maximum(jnp.max(jnp.abs(x)), 1e-12)) / sharpness
+    return m + t * jnp.log(jnp.sum(jnp.exp((x - m) / t)))
+
+
+def _objective(design: Design, task: _Task, n: int, sharpness):
+    """(smooth objective for gradients, exact objective, exact pieces)."""
+    dp, defl, spr = _grid_terms(design, task)
+    viol = jnp.maximum(task.min_spread - spr, 0.0)
+    penalty = SPREAD_PENALTY * jnp.mean(viol**2)
+    wire_cost = task.w_wires * n
+    smooth = (task.w_position * _smooth_max(dp, sharpness)
+              + task.w_deflection * _smooth_max(defl, sharpness) + wire_cost + penalty)
+    worst_dp, worst_defl = jnp.max(dp), jnp.max(defl)
+    exact = task.w_position * worst_dp + task.w_deflection * worst_defl + wire_cost
+    pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=jnp.min(spr),
+                  violations=jnp.sum(spr < task.min_spread))
+    return smooth, exact, pieces
+
+
+def _task(sc: Scenario) -> _Task:
+    f = lambda x: jnp.asarray(x, float)  # noqa: E731
+    return _Task(f(sc.theta_L), f(sc.delta), f(sc.dq), f(sc.load), f(sc.w_position),
+                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread))
+
+
+def _bounds(sc: Scenario, n: int) -> _Bounds:
+    r_lo, r_hi = sc.r_bounds(n)
+    arc0, arc_len = 0.0, 2 * math.pi
+    if sc.forbidden_arc is not None:
+        arc0 = sc.forbidden_arc[1]
+        arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
+    f = lambda x: jnp.asarray(x, float)  # noqa: E731
+    return _Bounds(f(r_lo), f(r_hi), f(sc.wire_stiffness[0]), f(sc.wire_stiffness[1]),
+                   f(sc.wire_diameter + sc.min_wire_gap), f(0.5 * sc.wire_diameter + sc.min_wire_gap),
+                   f(arc0), f(arc_len))
+
+
+def _base(sc: Scenario, n: int) -> Design:
+    return Design(n, sc.length, max(sc.pitch_radius[1], 1e-3), backbone_EI=sc.backbone_EI,
+                  preload=sc.preload)
+
+
+def _feasible_arc(sc: Scenario, n: int, r: float) -> bool:
+    if not sc.free_wire_angles:
+        return True
+    s_min = float(_min_angle(sc.wire_diameter + sc.min_wire_gap, r))
+    if sc.forbidden_arc is None:
+        return n * s_min <= 2 * math.pi + 1e-12
+    h = float(_min_angle(2 * (0.5 * sc.wire_diameter + sc.min_wire_gap), r)) / 2
+    arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
+    return arc_len - 2 * h - (n - 1) * s_min >= 0
+
+
+# ---------------------------------------------------------------------------------------------
+# The run
+# ---------------------------------------------------------------------------------------------
+@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps"))
+def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc,
+                steps):
+    """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
+
+    Returns the best exact objective and its variables per start, and the history of the best-so-far
+    exact objective (steps, starts).
+    """
+    opt = optax.adam(lr)
+
+    def loss(z, sharp):
+        d = _design(z, bounds, n, free, arc, base)
+        smooth, exact, _ = _objective(d, task, n, sharp)
+        return smooth, exact
+
+    def one_start(z):
+        state = opt.init(z)
+
+        def step(carry, i):
+            z, state, best, best_z = carry
+            sharp = sharp0 * 10.0 ** (i / jnp.maximum(steps - 1, 1))
+            (_, exact), g = jax.value_and_grad(loss, has_aux=True)(z, sharp)
+            improved = exact < best
+            best = jnp.where(improved, exact, best)
+            best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), z, best_z)
+            upd, state = opt.update(g, state, z)
+            return (optax.apply_updates(z, upd), state, best, best_z), best
+
+        init = (z, state, jnp.asarray(jnp.inf), z)
+        (z, _, best, best_z), hist = jax.lax.scan(step, init, jnp.arange(steps))
+        _, exact_last = loss(z, sharp0)
+        better = exact_last < best
+        best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), z, best_z)
+        return jnp.minimum(best, exact_last), best_z, hist
+
+    best, best_z, hist = jax.vmap(one_start)(z0)
+    return best, best_z, hist.T
+
+
+def _evaluate(z, bounds, task, base, n, free, arc):
+    d = _design(z, bounds, n, free, arc, base)
+    _, exact, pieces = _objective(d, task, n, 1.0)
+    return d, exact, pieces
+
+
+def _initial(sc: Scenario, n: int, key) -> dict:
+    k1, k2, k3, k4 = jax.random.split(key, 4)
+    S = sc.starts
+    n_gaps = n + 1 if sc.forbidden_arc is not None else n
+    z = {
+        "r": jax.random.normal(k1, (S,)),
+        "k": jax.random.normal(k2, (S,)),
+        "a0": jax.random.uniform(k3, (S,), minval=0.0, maxval=2 * jnp.pi / n),
+        "gaps": 0.5 * jax.random.normal(k4, (S, n_gaps)),
+    }
+    # start 0 is the "obvious" design: mid-range values, evenly spread wires
+    z["r"] = z["r"].at[0].set(0.0)
+    z["k"] = z["k"].at[0].set(0.0)
+    z["gaps"] = z["gaps"].at[0].set(0.0)
+    return z
+
+
+def _result_row(n, d: Design, exact, pieces) -> dict[str, Any]:
+    return {
+        "n_wires": n,
+        "pitch_radius_mm": float(d.pitch_radius),
+        "wire_stiffness_N_per_mm": float(d.wire_stiffness),
+        "wire_angles_deg": [float(a) for a in np.mod(np.degrees(np.asarray(d.wire_angles)), 360.0)],
+        "objective": float(exact),
+        "worst_position_uncertainty_mm": float(pieces["worst_dp"]),
+        "worst_deflection_mm": float(pieces["worst_defl"]),
+        "min_spread": float(pieces["min_spread"]),
+        "spread_violations": int(pieces["violations"]),
+        "feasible": bool(int(pieces["violations"]) == 0),
+    }
+
+
+def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
+    """Optimise every candidate wire count; return the ``result.json`` dictionary.
+
+    ``history`` (per wire count: the best exact objective after each step, best start) is included
+    for the convergence plot.
+    """
+    from tqdm.auto import tqdm
+
+    t0 = time.perf_counter()
+    task = _task(sc)
+    key = jax.random.PRNGKey(sc.seed)
+    rows, hist, evaluations = [], {}, 0
+    counts = tqdm(sc.n_wires, desc="wire counts", disable=not progress, leave=False)
+    for n in counts:
+        r_lo, r_hi = sc.r_bounds(n)
+        if r_lo > r_hi or not _feasible_arc(sc, n, r_hi):
+            rows.append({"n_wires": n, "feasible": False,
+                         "reason": "the geometric constraints leave no room for this many wires"})
+            continue
+        key, sub = jax.random.split(key)
+        bounds, base = _bounds(sc, n), _base(sc, n)
+        free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
+        best, best_z, h = _run_starts(_initial(sc, n, sub), bounds, task, base,
+                                      jnp.asarray(sc.learning_rate), jnp.asarray(sc.sharpness),
+                                      n=n, free=free, arc=arc, steps=sc.steps)
+        evaluations += sc.starts * (sc.steps + 1)
+        i = int(jnp.argmin(best))
+        z = jax.tree_util.tree_map(lambda a: a[i], best_z)
+        d, exact, pieces = _evaluate(z, bounds, task, base, n, free, arc)
+        rows.append(_result_row(n, d, exact, pieces))
+        hist[str(n)] = np.asarray(h[i]).tolist()
+    feasible = [r for r in rows if r.get("feasible")]
+    best_row = min(feasible, key=lambda r: r["objective"]) if feasible else None
+    return {
+        "best": best_row,
+        "per_wire_count": rows,
+        "seconds": time.perf_counter() - t0,
+        "evaluations": evaluations,
+        "history": hist,
+    }
+
+
+def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
+    """The exact objective and its pieces for a given design under a scenario (e.g. to check a
+    hand-made design, or the evenly spaced one, against the constraints)."""
+    _, exact, pieces = jax.jit(_objective, static_argnums=2)(design, _task(sc), design.n_wires, 1.0)
+    return _result_row(design.n_wires, design, exact, pieces)

@@ -1,0 +1,248 @@
+"""Design-optimisation scenarios: the JSON a designer writes, parsed, defaulted and validated.
+
+Every key has a documented default (:data:`DEFAULTS`); an unknown key or a value out of range raises
+``ValueError`` naming it. Units: mm, N, N/mm, degrees (converted to radians here, at the edge).
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .design import DEFAULT_BACKBONE_EI
+
+#: Every scenario key, its default and its meaning (the README's table is generated from this).
+DEFAULTS: dict[str, Any] = {
+    "length_mm": 20.0,
+    "backbone_EI_Nmm2": DEFAULT_BACKBONE_EI,
+    "n_wires": [3, 4],
+    "pitch_radius_mm": [0.5, 3.0],
+    "wire_stiffness_N_per_mm": [55.0, 105.0],
+    "free_wire_angles": False,
+    "joint_uncertainty_mm": 0.4,
+    "theta_L_deg": [5.0, 85.0, 5.0],
+    "delta_deg": [0.0, 360.0, 10.0],
+    "load_N": [5.0, 0.0, 0.0],
+    "preload_N": 0.0,
+    "weights": {"position_uncertainty": 1.0, "deflection": 1.0, "wire_count": 0.05},
+    "constraints": {
+        "outer_diameter_mm": None,
+        "wire_diameter_mm": 0.3,
+        "min_wall_mm": 0.2,
+        "min_wire_gap_mm": 0.2,
+    },
+    "min_spread": 0.25,
+    "forbidden_arc_deg": None,
+    "optimizer": {"starts": 4, "steps": 300, "learning_rate": 0.05, "sharpness": 30.0, "seed": 0},
+}
+
+DOC: dict[str, str] = {
+    "length_mm": "backbone length L (mm), > 0",
+    "backbone_EI_Nmm2": "backbone bending stiffness (N mm^2), >= 0",
+    "n_wires": "candidate wire counts (list of integers >= 3); each is optimised, the best reported",
+    "pitch_radius_mm": "[min, max] pitch radius r (mm); min == max fixes it",
+    "wire_stiffness_N_per_mm": "[min, max] wire stiffness k_w (N/mm); min == max fixes it",
+    "free_wire_angles": "false: evenly spaced wires; true: every wire angle is a design variable",
+    "joint_uncertainty_mm": "joint-level uncertainty dq (mm) of the pose-uncertainty bound (paper Sec. 4)",
+    "theta_L_deg": "[min, max, step] of theta_L (deg) the task needs, both ends included",
+    "delta_deg": "[min, max, step] of the bending directions delta (deg) the task needs",
+    "load_N": "[fx, fy, fz] tip force (N, base frame) for the compliance term (paper Sec. 6.2)",
+    "preload_N": "wire preload f_min (N), >= 0",
+    "weights": "objective weights: position_uncertainty (per mm of worst dp_max), deflection "
+               "(per mm of worst reduced deflection), wire_count (per wire)",
+    "constraints": "outer_diameter_mm (null = no limit), wire_diameter_mm, min_wall_mm (wire hole to "
+                   "outer wall), min_wire_gap_mm (between neighbouring wire holes)",
+    "min_spread": "controllability: at every task pose the smallest singular value of the taut wires' "
+                  "unit vectors [cos delta_k, sin delta_k] must be at least this (0..1)",
+    "forbidden_arc_deg": "null, or [start, end] (deg, counter-clockwise from x_b) of an arc no wire "
+                         "may occupy (e.g. a tool channel); needs free_wire_angles",
+    "optimizer": "starts (random restarts), steps (Adam steps per start), learning_rate, sharpness "
+                 "(of the log-sum-exp worst-case surrogate, relative), seed",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """A parsed, validated scenario (radians inside). Build with :func:`load_scenario`."""
+
+    length: float
+    backbone_EI: float
+    n_wires: tuple[int, ...]
+    pitch_radius: tuple[float, float]
+    wire_stiffness: tuple[float, float]
+    free_wire_angles: bool
+    dq: float
+    theta_L: np.ndarray
+    delta: np.ndarray
+    load: np.ndarray
+    preload: float
+    w_position: float
+    w_deflection: float
+    w_wires: float
+    outer_diameter: float | None
+    wire_diameter: float
+    min_wall: float
+    min_wire_gap: float
+    min_spread: float
+    forbidden_arc: tuple[float, float] | None
+    starts: int
+    steps: int
+    learning_rate: float
+    sharpness: float
+    seed: int
+    raw: dict = dataclasses.field(repr=False, compare=False, default_factory=dict)
+
+    def r_bounds(self, n: int) -> tuple[float, float]:
+        """Pitch-radius bounds for ``n`` evenly spaced wires after the geometric constraints.
+
+        Upper: the wire hole plus the wall fits inside the outer diameter,
+        ``r + d_w/2 + wall <= OD/2``. Lower: neighbouring holes keep the gap,
+        ``2 r sin(pi/n) >= d_w + gap`` (free angles use the same bound on the closest pair).
+        """
+        lo, hi = self.pitch_radius
+        if self.outer_diameter is not None:
+            hi = min(hi, 0.5 * self.outer_diameter - self.min_wall - 0.5 * self.wire_diameter)
+        lo = max(lo, (self.wire_diameter + self.min_wire_gap) / (2.0 * math.sin(math.pi / n)))
+        return lo, hi
+
+
+def _err(key: str, msg: str) -> ValueError:
+    return ValueError(f"scenario key {key!r}: {msg}")
+
+
+def _num(key, v, lo=None, hi=None, lo_open=False):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise _err(key, f"must be a finite number, got {v!r}")
+    if lo is not None and (v < lo or (lo_open and v == lo)):
+        raise _err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+    if hi is not None and v > hi:
+        raise _err(key, f"must be <= {hi}, got {v}")
+    return float(v)
+
+
+def _range(key, v, lo_open=True):
+    if not isinstance(v, (list, tuple)) or len(v) != 2:
+        raise _err(key, f"must be [min, max], got {v!r}")
+    a, b = (_num(key, x, 0.0, lo_open=lo_open) for x in v)
+    if a > b:
+        raise _err(key, f"min {a} is larger than max {b}")
+    return a, b
+
+
+def _grid(key, v, lo, hi):
+    if not isinstance(v, (list, tuple)) or len(v) != 3:
+        raise _err(key, f"must be [min, max, step], got {v!r}")
+    a, b, s = (_num(key, x) for x in v)
+    if s <= 0:
+        raise _err(key, f"step must be positive, got {s}")
+    if a > b:
+        raise _err(key, f"min {a} is larger than max {b}")
+    if a < lo or b > hi:
+        raise _err(key, f"must lie within [{lo}, {hi}] deg, got [{a}, {b}]")
+    n = int(math.floor((b - a) / s + 1e-9)) + 1
+    if n > 100_000:
+        raise _err(key, f"grid of {n} values is too fine")
+    return np.radians(a + s * np.arange(n))
+
+
+def _merge(key, given, default):
+    if not isinstance(given, dict):
+        raise _err(key, f"must be an object, got {given!r}")
+    unknown = sorted(set(given) - set(default))
+    if unknown:
+        raise _err(key, f"unknown sub-key(s) {unknown}; known: {sorted(default)}")
+    return {**default, **given}
+
+
+def parse_scenario(d: dict) -> Scenario:
+    """Validate a scenario dictionary and fill in the defaults."""
+    if not isinstance(d, dict):
+        raise ValueError(f"a scenario must be a JSON object, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(DEFAULTS))
+    if unknown:
+        raise ValueError(f"unknown scenario key(s) {unknown}; known: {sorted(DEFAULTS)}")
+    s = copy.deepcopy(DEFAULTS)
+    for k, v in d.items():
+        s[k] = _merge(k, v, DEFAULTS[k]) if isinstance(DEFAULTS[k], dict) else v
+
+    counts = s["n_wires"]
+    if isinstance(counts, int) and not isinstance(counts, bool):
+        counts = [counts]
+    if (not isinstance(counts, (list, tuple)) or not counts
+            or any(isinstance(c, bool) or not isinstance(c, int) or c < 3 or c > 16 for c in counts)):
+        raise _err("n_wires", f"must be a list of integers from 3 to 16, got {s['n_wires']!r}")
+    c = s["constraints"]
+    od = c["outer_diameter_mm"]
+    w = s["weights"]
+    o = s["optimizer"]
+    arc = s["forbidden_arc_deg"]
+    if arc is not None:
+        if not isinstance(arc, (list, tuple)) or len(arc) != 2:
+            raise _err("forbidden_arc_deg", f"must be null or [start, end], got {arc!r}")
+        a0, a1 = (_num("forbidden_arc_deg", x) for x in arc)
+        width = (a1 - a0) % 360.0
+        if not 0 < width < 360:
+            raise _err("forbidden_arc_deg", f"must span between 0 and 360 deg, got {arc!r}")
+        if not s["free_wire_angles"]:
+            raise _err("forbidden_arc_deg", "needs free_wire_angles: true")
+        arc = (math.radians(a0), math.radians(a0 + width))
+    if not isinstance(s["free_wire_angles"], bool):
+        raise _err("free_wire_angles", f"must be true or false, got {s['free_wire_angles']!r}")
+    for k in ("starts", "steps", "seed"):
+        if isinstance(o[k], bool) or not isinstance(o[k], int) or o[k] < (0 if k == "seed" else 1):
+            raise _err(f"optimizer.{k}", f"must be a positive integer, got {o[k]!r}")
+    load = s["load_N"]
+    if not isinstance(load, (list, tuple)) or len(load) != 3:
+        raise _err("load_N", f"must be [fx, fy, fz], got {load!r}")
+    scen = Scenario(
+        length=_num("length_mm", s["length_mm"], 0.0, lo_open=True),
+        backbone_EI=_num("backbone_EI_Nmm2", s["backbone_EI_Nmm2"], 0.0),
+        n_wires=tuple(sorted(set(counts))),
+        pitch_radius=_range("pitch_radius_mm", s["pitch_radius_mm"]),
+        wire_stiffness=_range("wire_stiffness_N_per_mm", s["wire_stiffness_N_per_mm"]),
+        free_wire_angles=s["free_wire_angles"],
+        dq=_num("joint_uncertainty_mm", s["joint_uncertainty_mm"], 0.0, lo_open=True),
+        theta_L=_grid("theta_L_deg", s["theta_L_deg"], 0.0, 90.0),
+        delta=_grid("delta_deg", s["delta_deg"], -360.0, 720.0),
+        load=np.array([_num("load_N", x) for x in load]),
+        preload=_num("preload_N", s["preload_N"], 0.0),
+        w_position=_num("weights.position_uncertainty", w["position_uncertainty"], 0.0),
+        w_deflection=_num("weights.deflection", w["deflection"], 0.0),
+        w_wires=_num("weights.wire_count", w["wire_count"], 0.0),
+        outer_diameter=None if od is None else _num("constraints.outer_diameter_mm", od, 0.0,
+                                                    lo_open=True),
+        wire_diameter=_num("constraints.wire_diameter_mm", c["wire_diameter_mm"], 0.0),
+        min_wall=_num("constraints.min_wall_mm", c["min_wall_mm"], 0.0),
+        min_wire_gap=_num("constraints.min_wire_gap_mm", c["min_wire_gap_mm"], 0.0),
+        min_spread=_num("min_spread", s["min_spread"], 0.0, 1.0),
+        forbidden_arc=arc,
+        starts=o["starts"],
+        steps=o["steps"],
+        learning_rate=_num("optimizer.learning_rate", o["learning_rate"], 0.0, lo_open=True),
+        sharpness=_num("optimizer.sharpness", o["sharpness"], 0.0, lo_open=True),
+        seed=o["seed"],
+        raw=s,
+    )
+    if all(scen.r_bounds(n)[0] > scen.r_bounds(n)[1] for n in scen.n_wires):
+        n = scen.n_wires[0]
+        lo, hi = scen.r_bounds(n)
+        raise _err("constraints", f"no pitch radius fits: {n} wires need r >= {lo:.3g} mm for the "
+                                  f"wire gap but the outer diameter allows r <= {hi:.3g} mm")
+    return scen
+
+
+def load_scenario(path) -> Scenario:
+    path = Path(path)
+    try:
+        d = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"scenario file {str(path)!r} does not exist") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"scenario file {str(path)!r} is not valid JSON: {e}") from None
+    return parse_scenario(d)
