@@ -1,0 +1,114 @@
+"""Independent NumPy/SciPy implementations the benchmarks compare the JAX path against.
+
+Written from MODEL.md (Sec. 1-4) without importing tension_zones, the way a MATLAB-style user would:
+* :func:`measures_loop`: one pose at a time, ``numpy.linalg.pinv``/``svd`` and the paper's literal
+  ``Q`` matrix of all ``3^n`` joint-error vectors (Eqs. 17-19);
+* :func:`measures_vectorised`: the same numbers, batched over poses with stacked ``numpy.linalg``
+  calls and the ``2^n`` sign vertices;
+* :func:`tensions_scipy_loop`: the tension distribution per pose with ``scipy.optimize.minimize``
+  (SLSQP), as the paper did with MATLAB's interior-point solver.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+TOL = 1e-9
+
+
+def jacobians(L, r, alpha, theta_L, delta):
+    """J_xpsi (6, 2) and J_qpsi (n, 2) at one pose (MODEL.md Sec. 1)."""
+    T = theta_L - np.pi / 2
+    s, c = np.sin(theta_L), np.cos(theta_L)
+    A = T * c - s + 1
+    sd, cd = np.sin(delta), np.cos(delta)
+    Jv = L * np.array([[cd * A / T**2, -sd * (s - 1) / T],
+                       [-sd * A / T**2, -cd * (s - 1) / T],
+                       [(T * s + c) / T**2, 0.0]])
+    Jw = np.array([[-sd, cd * c], [-cd, -sd * c], [0.0, -1 + s]])
+    dk = delta + alpha
+    Jq = r * np.stack([np.cos(dk), -T * np.sin(dk)], axis=1)
+    return np.vstack([Jv, Jw]), Jq
+
+
+def _sv(M):
+    s = np.append(np.linalg.svd(M, compute_uv=False), 0.0)  # one taut wire: one column
+    s1, s2 = s[0], s[1]
+    return s1, (s2 if s2 > max(M.shape) * np.finfo(float).eps * s1 else 0.0)
+
+
+def measures_loop(L, r, alpha, thetas, deltas, dq):
+    """Per-pose loop over the grid; returns a dict of (n_theta, n_delta) arrays, reduced Jacobian."""
+    n = len(alpha)
+    Q = dq * np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=n))).T  # (n, 3^n)
+    out = {k: np.zeros((len(thetas), len(deltas))) for k in
+           ("kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "dp_max", "dw_max")}
+    for i, th in enumerate(thetas):
+        for j, de in enumerate(deltas):
+            Jx, Jq = jacobians(L, r, alpha, th, de)
+            taut = np.cos(de + alpha) > TOL
+            P = np.linalg.pinv(Jq[taut])
+            Jxq = Jx @ P
+            for part, rows in (("v", slice(0, 3)), ("w", slice(3, 6))):
+                s1, s2 = _sv(Jxq[rows])
+                out[f"kci_{part}"][i, j] = s2 / s1 if s1 > 0 else 0.0
+                out[f"sigma_min_{part}"][i, j] = s2
+            dx = Jxq @ Q[taut]
+            out["dp_max"][i, j] = np.max(np.linalg.norm(dx[:3], axis=0))
+            out["dw_max"][i, j] = np.max(np.linalg.norm(dx[3:], axis=0))
+    return out
+
+
+def measures_vectorised(L, r, alpha, thetas, deltas, dq):
+    """The same measures, batched over all poses with stacked numpy.linalg calls."""
+    n = len(alpha)
+    th, de = (x.ravel() for x in np.meshgrid(thetas, deltas, indexing="ij"))
+    T = th - np.pi / 2
+    s, c = np.sin(th), np.cos(th)
+    A = T * c - s + 1
+    sd, cd = np.sin(de), np.cos(de)
+    z = np.zeros_like(T)
+    Jv = L * np.stack([np.stack([cd * A / T**2, -sd * (s - 1) / T], -1),
+                       np.stack([-sd * A / T**2, -cd * (s - 1) / T], -1),
+                       np.stack([(T * s + c) / T**2, z], -1)], 1)
+    Jw = np.stack([np.stack([-sd, cd * c], -1), np.stack([-cd, -sd * c], -1),
+                   np.stack([z, -1 + s], -1)], 1)
+    dk = de[:, None] + alpha[None, :]
+    taut = np.cos(dk) > TOL
+    Jq = r * np.stack([np.cos(dk), -T[:, None] * np.sin(dk)], -1) * taut[..., None]
+    P = np.linalg.pinv(Jq)  # (N, 2, n)
+    out = {}
+    for part, Jx in (("v", Jv), ("w", Jw)):
+        M = Jx @ P
+        sv = np.linalg.svd(M, compute_uv=False)
+        s1 = sv[:, 0]
+        s2 = np.where(sv[:, 1] > max(3, n) * np.finfo(float).eps * s1, sv[:, 1], 0.0)
+        out[f"kci_{part}"] = np.where(s1 > 0, s2 / np.where(s1 > 0, s1, 1), 0.0)
+        out[f"sigma_min_{part}"] = s2
+    signs = dq * np.array(list(itertools.product((-1.0, 1.0), repeat=n))).T  # (n, 2^n)
+    dpsi = P @ signs  # slack columns of P are zero, so their sign does not matter
+    out["dp_max"] = np.max(np.linalg.norm(Jv @ dpsi, axis=1), axis=1)
+    out["dw_max"] = np.max(np.linalg.norm(Jw @ dpsi, axis=1), axis=1)
+    return {k: v.reshape(len(thetas), len(deltas)) for k, v in out.items()}
+
+
+def tensions_scipy_loop(L, r, alpha, EI, thetas, deltas, wrench, f_min=0.0):
+    """min ||tau||^2 s.t. J_qpsi^T tau = J_xpsi^T w - grad U, tau >= f_min; one SLSQP per pose."""
+    from scipy.optimize import minimize
+
+    n = len(alpha)
+    out = np.zeros((len(thetas), len(deltas), n))
+    for i, th in enumerate(thetas):
+        for j, de in enumerate(deltas):
+            Jx, Jq = jacobians(L, r, alpha, th, de)
+            gradU = np.array([EI * (th - np.pi / 2) / L, 0.0])
+            rhs = Jx.T @ wrench - gradU
+            res = minimize(lambda t: t @ t, np.full(n, f_min + 1.0), jac=lambda t: 2 * t,
+                           constraints=[{"type": "eq", "fun": lambda t: Jq.T @ t - rhs,
+                                         "jac": lambda t: Jq.T}],
+                           bounds=[(f_min, None)] * n, method="SLSQP",
+                           options={"ftol": 1e-12, "maxiter": 200})
+            out[i, j] = res.x
+    return out

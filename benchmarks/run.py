@@ -1,0 +1,287 @@
+"""Speed and scale, measured side by side in one run (issue 7).
+
+    python benchmarks/run.py [--quick] [--json OUT.json] [--no-readme]
+
+Every number is the median of at least 5 timed runs after a warm-up, float64, on this machine's CPU;
+compile time (first call minus the median) is reported separately. Results are written into the
+table of ``benchmarks/README.md`` (between the RESULTS markers) unless ``--no-readme``.
+Targets are reported, never asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import numpy_baselines as nb  # noqa: E402
+
+import tension_zones as tz  # noqa: E402
+
+REPEATS = 5
+
+
+def timed(fn, repeats=REPEATS):
+    """(first call seconds, median of `repeats` further calls)."""
+    t0 = time.perf_counter()
+    fn()
+    first = time.perf_counter() - t0
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return first, statistics.median(times)
+
+
+def grid(theta_step, delta_step):
+    th = np.radians(np.arange(0.0, 85.0 + 1e-9, theta_step))
+    de = np.radians(np.arange(0.0, 360.0 + 1e-9, delta_step))
+    return th, de
+
+
+# ------------------------------------------------------------------------------------------------
+def bench_kinematics(quick):
+    """KCI, sigma_min, dp_max, dw_max (full and reduced) for n = 3, 4, 8: loop, NumPy, JAX."""
+    from tension_zones.metrics import pose_metrics
+    from tension_zones.sweep import sweep_grid
+
+    rows = []
+    th_small, de_small = grid(5.0, 2.5)  # the paper's grid: 2610 poses
+    th_big, de_big = grid(0.5, 0.25) if not quick else grid(1.0, 1.0)
+    for n in (3, 4, 8):
+        d = tz.Design(n, 20.0, 2.0)
+        alpha = np.asarray(d.wire_angles)
+        n_small = th_small.size * de_small.size
+        n_big = th_big.size * de_big.size
+        # the per-pose loop is slow (3^n columns): time it once on a slice of the paper grid
+        th_loop = th_small[:: (6 if n == 8 else 1)]
+        t0 = time.perf_counter()
+        nb.measures_loop(20.0, 2.0, alpha, th_loop, de_small, 0.4)
+        loop_rate = th_loop.size * de_small.size / (time.perf_counter() - t0)
+        _, t_np = timed(lambda: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4),
+                        repeats=3 if quick else REPEATS)
+
+        def jax_run(design=d):
+            return sweep_grid(pose_metrics, design, th_big, de_big, 0.4, quiet=True)
+
+        first, t_jax = timed(jax_run, repeats=3 if quick else REPEATS)
+        # new values of the same shapes: no recompile (second design, timed like the median)
+        d2 = d.replace(pitch_radius=2.5, length=25.0)
+        t0 = time.perf_counter()
+        jax_run(d2)
+        t_new_values = time.perf_counter() - t0
+        rows.append({
+            "n_wires": n, "poses": n_big,
+            "loop_poses_per_s": loop_rate,
+            "numpy_poses_per_s": n_big / t_np,
+            "jax_poses_per_s": n_big / t_jax,
+            "jax_compile_s": max(first - t_jax, 0.0),
+            "jax_new_values_s": t_new_values, "jax_median_s": t_jax,
+            "speedup_vs_loop": (n_big / t_jax) / loop_rate,
+            "speedup_vs_numpy": t_np / t_jax,
+        })
+        del n_small
+    return rows
+
+
+def bench_compliance(quick):
+    """Tension solve + compliance on the paper's Sec. 6.2 grid: SLSQP per pose vs batched JAX."""
+    from tension_zones.statics import compliance_grid
+
+    th = np.radians(np.linspace(89.0, 45.0, 10))
+    de = np.radians(np.arange(0.0, 360.0 + 1e-9, 15.0))
+    w = np.array([5.0, 0, 0, 0, 0, 0])
+    rows = []
+    for n in (3, 4):
+        d = tz.Design(n, 20.0, 2.0)
+        alpha = np.asarray(d.wire_angles)
+        t0 = time.perf_counter()
+        nb.tensions_scipy_loop(20.0, 2.0, alpha, float(d.backbone_EI), th, de, w)
+        t_scipy = time.perf_counter() - t0
+        # the batched path on a grid 100x larger, so the timer sees real work
+        th_b = np.radians(np.linspace(89.0, 45.0, 100))
+        de_b = np.radians(np.arange(0.0, 360.0, 0.15))
+        first, t_jax = timed(lambda: compliance_grid(d, w, np.degrees(th_b), np.degrees(de_b)),
+                             repeats=3 if quick else REPEATS)
+        n_loop, n_jax = th.size * de.size, th_b.size * de_b.size
+        rows.append({"n_wires": n, "scipy_poses_per_s": n_loop / t_scipy,
+                     "jax_poses_per_s": n_jax / t_jax, "jax_compile_s": max(first - t_jax, 0.0),
+                     "speedup": (n_jax / t_jax) / (n_loop / t_scipy)})
+    return rows
+
+
+_SCALING_CHILD = textwrap.dedent("""
+    import json, resource, sys, time
+    import numpy as np
+    import tension_zones as tz
+    from tension_zones.metrics import pose_metrics
+    from tension_zones.sweep import sweep_grid
+    n_poses, n_wires = int(sys.argv[1]), int(sys.argv[2])
+    n_delta = 1441
+    n_theta = max(1, round(n_poses / n_delta))
+    th = np.radians(np.linspace(0.0, 85.0, n_theta)); de = np.radians(np.linspace(0, 360, n_delta))
+    d = tz.Design(n_wires, 20.0, 2.0)
+    keep = ["dp_max_reduced", "dw_max_reduced", "kci_v_reduced", "n_taut"]
+    t0 = time.perf_counter()
+    sweep_grid(pose_metrics, d, th[:1], de, 0.4, quiet=True, keep=keep)
+    t_first = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    out = sweep_grid(pose_metrics, d, th, de, 0.4, quiet=True, keep=keep)
+    t = time.perf_counter() - t0
+    import jax
+    print(json.dumps({"poses": n_theta * n_delta, "seconds": t, "first_call_s": t_first,
+                      "devices": jax.device_count(),
+                      "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}))
+""")
+
+
+def _child(args, env_extra=None):
+    env = dict(os.environ)
+    env.update(env_extra or {})
+    r = subprocess.run([sys.executable, "-c", _SCALING_CHILD, *map(str, args)], env=env,
+                       capture_output=True, text=True, timeout=3600)
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr[-2000:])
+    return json.loads(r.stdout.strip().splitlines()[-1])
+
+
+def bench_scaling(quick):
+    sizes = [10**3, 10**4, 10**5, 10**6] + ([] if quick else [10**7])
+    rows = [_child([n, 4]) for n in sizes]
+    big = sizes[-1]
+    sharded = _child([big, 4], {"XLA_FLAGS": "--xla_force_host_platform_device_count=4"})
+    return {"rows": rows, "sharded_4_host_devices": sharded}
+
+
+def plot_scaling(scaling, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = scaling["rows"]
+    n = [r["poses"] for r in rows]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+    ax[0].loglog(n, [r["seconds"] for r in rows], "o-")
+    ax[0].set_xlabel("poses")
+    ax[0].set_ylabel("time (s)")
+    ax[0].set_title("Sweep time (4 wires, all measures)")
+    ax[0].grid(True, which="both", alpha=0.3)
+    ax[1].semilogx(n, [r["peak_rss_mb"] for r in rows], "o-")
+    ax[1].axhline(2048, color="r", ls="--", label="2 GB target")
+    ax[1].set_xlabel("poses")
+    ax[1].set_ylabel("peak resident memory (MB)")
+    ax[1].set_title("Peak memory (whole process)")
+    ax[1].legend()
+    ax[1].grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+# ------------------------------------------------------------------------------------------------
+def machine():
+    import jax
+
+    return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
+            "python": platform.python_version(), "jax": jax.__version__,
+            "numpy": np.__version__}
+
+
+def markdown(res) -> str:
+    m = res["machine"]
+    out = [f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
+           f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`.", ""]
+    out += ["### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)", "",
+            "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
+            "x loop | x NumPy | compile (s) | target |",
+            "|---|---|---|---|---|---|---|---|"]
+    for r in res["kinematics"]:
+        tgt = 3e6 if r["n_wires"] in (3, 4) else 1e6
+        ok = (r["jax_poses_per_s"] >= tgt and r["speedup_vs_loop"] >= 300
+              and r["speedup_vs_numpy"] >= 3 and r["jax_compile_s"] < 5)
+        out.append(f"| {r['n_wires']} | {r['loop_poses_per_s']:.3g} | {r['numpy_poses_per_s']:.3g}"
+                   f" | {r['jax_poses_per_s']:.3g} | {r['speedup_vs_loop']:.0f} | "
+                   f"{r['speedup_vs_numpy']:.1f} | {r['jax_compile_s']:.2f} | "
+                   f"{'met' if ok else 'MISSED'} (>= {tgt:.0e}/s, 300x, 3x, < 5 s) |")
+    if "compliance" in res:
+        out += ["", "### Compliance sweep (tension solve + stiffness + deflection)", "",
+                "| wires | SLSQP per pose (poses/s) | JAX batched (poses/s) | speed-up | "
+                "compile (s) | target |", "|---|---|---|---|---|---|"]
+        for r in res["compliance"]:
+            out.append(f"| {r['n_wires']} | {r['scipy_poses_per_s']:.3g} | "
+                       f"{r['jax_poses_per_s']:.3g} | {r['speedup']:.0f} | "
+                       f"{r['jax_compile_s']:.2f} | "
+                       f"{'met' if r['speedup'] >= 1000 else 'MISSED'} (>= 1000x) |")
+    if "scaling" in res:
+        out += ["", "### Scaling (4 wires, every measure, chunked sweep; `scaling.png`)", "",
+                "| poses | time (s) | poses/s | peak memory (MB) |", "|---|---|---|---|"]
+        for r in res["scaling"]["rows"]:
+            out.append(f"| {r['poses']:.2g} | {r['seconds']:.3g} | {r['poses'] / r['seconds']:.3g}"
+                       f" | {r['peak_rss_mb']:.0f} |")
+        s = res["scaling"]["sharded_4_host_devices"]
+        out.append(f"| {s['poses']:.2g} on {s['devices']} forced host devices | {s['seconds']:.3g} "
+                   f"| {s['poses'] / s['seconds']:.3g} | {s['peak_rss_mb']:.0f} |")
+    for key, title in (("calibration", "Calibration"), ("optimiser", "Optimiser")):
+        if key in res:
+            out += ["", f"### {title}", "", "| what | seconds | note |", "|---|---|---|"]
+            for r in res[key]:
+                out.append(f"| {r['what']} | {r['seconds']:.3g} | {r.get('note', '')} |")
+    return "\n".join(out)
+
+
+def write_readme(md: str):
+    path = HERE / "README.md"
+    text = path.read_text()
+    a, b = "<!-- RESULTS START -->", "<!-- RESULTS END -->"
+    head, rest = text.split(a, 1)
+    _, tail = rest.split(b, 1)
+    path.write_text(f"{head}{a}\n{md}\n{b}{tail}")
+
+
+SECTIONS = {"kinematics": bench_kinematics, "compliance": bench_compliance,
+            "scaling": bench_scaling}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="smaller grids, fewer repeats, no 1e7 sweep")
+    p.add_argument("--json", help="write every number to this JSON file")
+    p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
+    p.add_argument("--only", nargs="*", choices=sorted(SECTIONS), help="run only these sections")
+    args = p.parse_args(argv)
+    res = {"machine": machine(),
+           "command": "python benchmarks/run.py" + (" --quick" if args.quick else "")}
+    for name, fn in SECTIONS.items():
+        if args.only and name not in args.only:
+            continue
+        print(f"[bench] {name} ...", flush=True)
+        res[name] = fn(args.quick)
+        print(json.dumps(res[name], indent=1, default=float), flush=True)
+    if "scaling" in res:
+        plot_scaling(res["scaling"], HERE / "scaling.png")
+    md = markdown(res)
+    print(md)
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=2, default=float))
+    if not args.no_readme:
+        write_readme(md)
+
+
+if __name__ == "__main__":
+    main()
