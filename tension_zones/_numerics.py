@@ -11,6 +11,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import jax
 import jax.numpy as jnp
 
@@ -63,6 +65,22 @@ def cubic_sq(x2):
     )
 
 
+_SURROGATE = [True]
+
+
+@contextlib.contextmanager
+def frozen_masks():
+    """Inside this context, functions *traced* here see every straight-through mask as a constant
+    (zero gradient): the exact gradient of the piecewise-smooth function, which finite differences
+    reproduce away from mask switches. For checks and diagnostics; jit-compiled functions keep the
+    behaviour they were traced with, so trace (call a fresh ``jit``) inside the context."""
+    _SURROGATE.append(False)
+    try:
+        yield
+    finally:
+        _SURROGATE.pop()
+
+
 def straight_through(hard, soft):
     """Forward value exactly ``hard``; gradient that of ``soft``.
 
@@ -70,6 +88,8 @@ def straight_through(hard, soft):
     so that the forward value is bit-for-bit the hard value (``x - x == 0`` exactly).
     """
     hard = jax.lax.stop_gradient(jnp.asarray(hard, soft.dtype))
+    if not _SURROGATE[-1]:
+        return hard
     return hard + (soft - jax.lax.stop_gradient(soft))
 
 

@@ -73,6 +73,33 @@ def cmd_reproduce(args) -> None:
     reproduce(Path(args.out), quiet=args.quiet)
 
 
+# --- optimize (issue 5) -----------------------------------------------------------------------
+def cmd_optimize(args) -> None:
+    from .optimise import optimize, write_outputs
+    from .scenario import load_scenario
+
+    try:
+        sc = load_scenario(args.scenario)
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out must be a folder, got the file {args.out!r}")
+    result = optimize(sc, progress=not args.quiet)
+    paths = write_outputs(result, out)
+    best = result["best"]
+    if best is None:
+        print("no feasible design: see result.json for each wire count's violations")
+    else:
+        print(f"best: {best['n_wires']} wires, r = {best['pitch_radius_mm']:.4g} mm, "
+              f"k_w = {best['wire_stiffness_N_per_mm']:.4g} N/mm, angles = "
+              f"{', '.join(f'{a:.1f}' for a in best['wire_angles_deg'])} deg, "
+              f"objective {best['objective']:.4g}")
+    if not args.quiet:
+        for p in paths:
+            print(f"wrote {p}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tension-zones",
@@ -86,6 +113,12 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--out", required=True, help="output PNG file")
     m.add_argument("--quiet", action="store_true", help="print only the table")
     m.set_defaults(func=cmd_maps)
+
+    o = sub.add_parser("optimize", help="search wire count, pitch radius, stiffness and placement")
+    o.add_argument("--scenario", required=True, help="scenario JSON (keys: see the README)")
+    o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
+    o.add_argument("--quiet", action="store_true", help="no progress bar")
+    o.set_defaults(func=cmd_optimize)
 
     r = sub.add_parser("reproduce", help="reproduce the paper's figures and tables into a folder")
     r.add_argument("--out", default="reproduce_out", help="output folder (default: reproduce_out)")

@@ -10,12 +10,14 @@ with ``dp_max_reduced`` the reduced-Jacobian position-uncertainty bound (paper S
 **Controllability is a constraint.** The pinv-based bound rewards slack wires (a direction nobody
 actuates drops out of ``pinv``), so a design is feasible only if at every task pose the taut wires
 span the configuration space: ``spread >= min_spread`` where ``spread`` is the smallest singular
-value of the taut wires' unit vectors ``[cos delta_k, sin delta_k]``. It enters the optimisation
+value of the taut wires' unit vectors ``[cos delta_k, sin delta_k]``, checked exactly over the
+task's continuous range of bending directions (grid directions plus every zone boundary inside
+the range, see :func:`_range_spread`), so a design cannot pass by dodging the grid. It enters the optimisation
 as a quadratic penalty through the straight-through tension masks, and violations are reported.
 
-Variables are unconstrained and mapped onto the feasible set exactly (reparametrisation): the pitch
-radius and wire stiffness through a sigmoid between their bounds (the bounds already include the
-outer-diameter and wire-gap limits), free wire angles as a start angle plus gaps that are each at
+Variables map onto the feasible set exactly: the pitch radius and wire stiffness are box variables
+scaled to [0, 1] and projected after every step (their bounds already include the outer-diameter
+and wire-gap limits, and an optimum on a bound is reached exactly), free wire angles as a start angle plus gaps that are each at
 least the minimum angular separation (softmax of the slack), inside the allowed arc when a tool
 channel forbids part of the circle. Gradients: Adam (optax) on a log-sum-exp surrogate of each
 worst case whose sharpness rises geometrically over the run (continuation); the **exact** maximum
@@ -42,6 +44,8 @@ from .zones import tension_mask
 
 #: Penalty weight on the mean squared controllability violation (objective units per unit^2).
 SPREAD_PENALTY = 1e3
+#: Added per violating pose when ranking iterates, so any feasible design beats any infeasible one.
+INFEASIBLE_RANK = 1e6
 
 
 # ---------------------------------------------------------------------------------------------
@@ -89,8 +93,9 @@ def _angles(z_a0, z_gaps, r, b: _Bounds, n: int, free: bool, arc: bool):
 
 
 def _design(z, b: _Bounds, n: int, free: bool, arc: bool, base: Design) -> Design:
-    r = b.r_lo + (b.r_hi - b.r_lo) * jax.nn.sigmoid(z["r"])
-    k = b.k_lo + (b.k_hi - b.k_lo) * jax.nn.sigmoid(z["k"])
+    # r and k are box variables in [0, 1] (projected after every step, so a bound is reachable)
+    r = b.r_lo + (b.r_hi - b.r_lo) * z["r"]
+    k = b.k_lo + (b.k_hi - b.k_lo) * z["k"]
     angles = _angles(z["a0"], z["gaps"], r, b, n, free, arc)
     return base.replace(pitch_radius=r, wire_stiffness=k, wire_angles=angles)
 
@@ -134,6 +139,8 @@ class _Task:
     w_deflection: jax.Array
     w_wires: jax.Array
     min_spread: jax.Array
+    delta_lo: jax.Array  # the task's continuous range of bending directions (rad)
+    delta_span: jax.Array
 
 
 jax.tree_util.register_dataclass(
@@ -141,52 +148,87 @@ jax.tree_util.register_dataclass(
 )
 
 
-def _pose_terms(design: Design, theta_L, delta, task: _Task):
-    """(position-uncertainty bound dp_max (mm), reduced deflection (mm)) at one pose."""
+def _pose_terms(design: Design, theta_L, delta, task: _Task, with_defl: bool = True):
+    """(dp_max (mm), reduced deflection (mm), statics feasible) at one pose.
+
+    dp_max: reduced-Jacobian position-uncertainty bound (paper Eq. 19, metrics.pose_measures);
+    deflection: reduced compliance under the scenario's load (paper Eq. 31, statics).
+    """
     from .metrics import pose_measures
-    from .statics import pose_deflection
+    from .statics import compliance_pose
 
     mask = tension_mask(design, delta)
     dp = pose_measures(design, theta_L, delta, task.dq, mask=mask)["dp_max"]
-    defl = pose_deflection(design, theta_L, delta, task.load)
-    return dp, defl
+    if not with_defl:  # static: a zero deflection weight skips the statics entirely
+        return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
+    c = compliance_pose(design, theta_L, delta, task.load)
+    ok = c["feasible"] & jnp.isfinite(c["deflection_mm_reduced"])
+    defl = jnp.where(ok, c["deflection_mm_reduced"], 0.0)  # double-where: no NaN in gradients
+    return dp, defl, ok
 
 
-def _grid_terms(design: Design, task: _Task):
-    """Per-pose terms on the task grid, each (n_theta, n_delta), and the spread per delta."""
-    inner = jax.vmap(lambda t, d: _pose_terms(design, t, d, task), in_axes=(None, 0))
-    dp, defl = jax.vmap(inner, in_axes=(0, None))(task.theta_L, task.delta)
-    spr = jax.vmap(lambda d: spread(design, d))(task.delta)
-    return dp, defl, spr
+def zone_boundaries(design: Design):
+    """The 2n bending directions (rad) where a wire enters or leaves its zone: ``-alpha_k +- pi/2``."""
+    a = design.wire_angles
+    return jnp.concatenate([-a + jnp.pi / 2, -a - jnp.pi / 2])
+
+
+def _range_spread(design: Design, task: _Task):
+    """Spread at the task grid's directions and at every zone boundary inside the task's range.
+
+    The spread is invariant to rotating all wires, so along delta it only changes where the taut
+    set does; at a boundary the boundary wire is slack (MODEL.md rule), the taut set is the
+    intersection of its neighbours' and the spread their minimum. The minimum over the continuous
+    range is therefore attained on this finite set: the check is exact, not just on grid points.
+    """
+    on_grid = jax.vmap(lambda d: spread(design, d))(task.delta)
+    bnd = zone_boundaries(design)
+    inside = jnp.mod(bnd - task.delta_lo, 2 * jnp.pi) <= task.delta_span + 1e-12
+    at_bnd = jax.vmap(lambda d: spread(design, d))(bnd)
+    return jnp.concatenate([on_grid, jnp.where(inside, at_bnd, jnp.inf)])
+
+
+def _grid_terms(design: Design, task: _Task, with_defl: bool = True):
+    """Per-pose terms on the task grid, each (n_theta, n_delta), and the spread over the range."""
+    inner = jax.vmap(lambda t, d: _pose_terms(design, t, d, task, with_defl), in_axes=(None, 0))
+    dp, defl, ok = jax.vmap(inner, in_axes=(0, None))(task.theta_L, task.delta)
+    return dp, defl, ok, _range_spread(design, task)
 
 
 def _smooth_max(x, sharpness):
-    """Log-sum-exp upper bound of max(x), relative temperature max|x| / sharpness."""
+    """Log-sum-exp upper bound of max(x) with the relative temperature t = max|x| / sharpness.
+
+    ``max(x) <= smooth <= max(x) + t log(size)``. The shift by the (stop-gradient) maximum only
+    guards against overflow; it leaves value and gradient unchanged.
+    """
     x = x.ravel()
     m = jax.lax.stop_gradient(jnp.max(x))
-    t = jax.lax.stop_gradient(jnp.maximum(jnp.max(jnp.abs(x)), 1e-12)) / sharpness
+    t = jnp.maximum(jnp.max(jnp.abs(x)), 1e-12) / sharpness
     return m + t * jnp.log(jnp.sum(jnp.exp((x - m) / t)))
 
 
-def _objective(design: Design, task: _Task, n: int, sharpness):
+def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool = True):
     """(smooth objective for gradients, exact objective, exact pieces)."""
-    dp, defl, spr = _grid_terms(design, task)
-    viol = jnp.maximum(task.min_spread - spr, 0.0)
-    penalty = SPREAD_PENALTY * jnp.mean(viol**2)
+    dp, defl, ok, spr = _grid_terms(design, task, with_defl)
+    viol = jnp.maximum(task.min_spread - spr, 0.0)  # 0 for boundaries outside the range (inf)
+    # poses the wires cannot hold without pushing count as a controllability violation too
+    penalty = SPREAD_PENALTY * (jnp.mean(viol**2) + jnp.mean(1.0 - ok))
     wire_cost = task.w_wires * n
     smooth = (task.w_position * _smooth_max(dp, sharpness)
               + task.w_deflection * _smooth_max(defl, sharpness) + wire_cost + penalty)
     worst_dp, worst_defl = jnp.max(dp), jnp.max(defl)
     exact = task.w_position * worst_dp + task.w_deflection * worst_defl + wire_cost
     pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=jnp.min(spr),
-                  violations=jnp.sum(spr < task.min_spread))
+                  violations=jnp.sum(spr < task.min_spread),
+                  statics_infeasible=jnp.sum(~ok))
     return smooth, exact, pieces
 
 
 def _task(sc: Scenario) -> _Task:
     f = lambda x: jnp.asarray(x, float)  # noqa: E731
+    span = min(float(sc.delta[-1] - sc.delta[0]), 2 * math.pi)
     return _Task(f(sc.theta_L), f(sc.delta), f(sc.dq), f(sc.load), f(sc.w_position),
-                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread))
+                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]), f(span))
 
 
 def _bounds(sc: Scenario, n: int) -> _Bounds:
@@ -220,20 +262,21 @@ def _feasible_arc(sc: Scenario, n: int, r: float) -> bool:
 # ---------------------------------------------------------------------------------------------
 # The run
 # ---------------------------------------------------------------------------------------------
-@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps"))
+@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"))
 def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc,
-                steps):
+                steps, with_defl):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
 
-    Returns the best exact objective and its variables per start, and the history of the best-so-far
-    exact objective (steps, starts).
+    Returns per start: the best rank (exact objective, plus INFEASIBLE_RANK per violating pose), its
+    variables, and the best-so-far rank after every step, (starts, steps).
     """
     opt = optax.adam(lr)
 
     def loss(z, sharp):
         d = _design(z, bounds, n, free, arc, base)
-        smooth, exact, _ = _objective(d, task, n, sharp)
-        return smooth, exact
+        smooth, exact, p = _objective(d, task, n, sharp, with_defl)
+        # rank iterates by the exact objective, feasible ones first
+        return smooth, exact + INFEASIBLE_RANK * (p["violations"] + p["statics_infeasible"])
 
     def one_start(z):
         state = opt.init(z)
@@ -246,7 +289,9 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
             best = jnp.where(improved, exact, best)
             best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), z, best_z)
             upd, state = opt.update(g, state, z)
-            return (optax.apply_updates(z, upd), state, best, best_z), best
+            z = optax.apply_updates(z, upd)
+            z = {**z, "r": jnp.clip(z["r"], 0.0, 1.0), "k": jnp.clip(z["k"], 0.0, 1.0)}
+            return (z, state, best, best_z), best
 
         init = (z, state, jnp.asarray(jnp.inf), z)
         (z, _, best, best_z), hist = jax.lax.scan(step, init, jnp.arange(steps))
@@ -255,13 +300,12 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
         best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), z, best_z)
         return jnp.minimum(best, exact_last), best_z, hist
 
-    best, best_z, hist = jax.vmap(one_start)(z0)
-    return best, best_z, hist.T
+    return jax.vmap(one_start)(z0)
 
 
-def _evaluate(z, bounds, task, base, n, free, arc):
+def _evaluate(z, bounds, task, base, n, free, arc, with_defl):
     d = _design(z, bounds, n, free, arc, base)
-    _, exact, pieces = _objective(d, task, n, 1.0)
+    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(d, task, n, 1.0, with_defl)
     return d, exact, pieces
 
 
@@ -270,14 +314,14 @@ def _initial(sc: Scenario, n: int, key) -> dict:
     S = sc.starts
     n_gaps = n + 1 if sc.forbidden_arc is not None else n
     z = {
-        "r": jax.random.normal(k1, (S,)),
-        "k": jax.random.normal(k2, (S,)),
+        "r": jax.random.uniform(k1, (S,)),
+        "k": jax.random.uniform(k2, (S,)),
         "a0": jax.random.uniform(k3, (S,), minval=0.0, maxval=2 * jnp.pi / n),
         "gaps": 0.5 * jax.random.normal(k4, (S, n_gaps)),
     }
     # start 0 is the "obvious" design: mid-range values, evenly spread wires
-    z["r"] = z["r"].at[0].set(0.0)
-    z["k"] = z["k"].at[0].set(0.0)
+    z["r"] = z["r"].at[0].set(0.5)
+    z["k"] = z["k"].at[0].set(0.5)
     z["gaps"] = z["gaps"].at[0].set(0.0)
     return z
 
@@ -293,7 +337,8 @@ def _result_row(n, d: Design, exact, pieces) -> dict[str, Any]:
         "worst_deflection_mm": float(pieces["worst_defl"]),
         "min_spread": float(pieces["min_spread"]),
         "spread_violations": int(pieces["violations"]),
-        "feasible": bool(int(pieces["violations"]) == 0),
+        "statics_infeasible_poses": int(pieces["statics_infeasible"]),
+        "feasible": bool(int(pieces["violations"]) == 0 and int(pieces["statics_infeasible"]) == 0),
     }
 
 
@@ -321,11 +366,12 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
         free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
         best, best_z, h = _run_starts(_initial(sc, n, sub), bounds, task, base,
                                       jnp.asarray(sc.learning_rate), jnp.asarray(sc.sharpness),
-                                      n=n, free=free, arc=arc, steps=sc.steps)
+                                      n=n, free=free, arc=arc, steps=sc.steps,
+                                      with_defl=sc.w_deflection > 0)
         evaluations += sc.starts * (sc.steps + 1)
         i = int(jnp.argmin(best))
         z = jax.tree_util.tree_map(lambda a: a[i], best_z)
-        d, exact, pieces = _evaluate(z, bounds, task, base, n, free, arc)
+        d, exact, pieces = _evaluate(z, bounds, task, base, n, free, arc, sc.w_deflection > 0)
         rows.append(_result_row(n, d, exact, pieces))
         hist[str(n)] = np.asarray(h[i]).tolist()
     feasible = [r for r in rows if r.get("feasible")]
@@ -342,5 +388,22 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
 def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     """The exact objective and its pieces for a given design under a scenario (e.g. to check a
     hand-made design, or the evenly spaced one, against the constraints)."""
-    _, exact, pieces = jax.jit(_objective, static_argnums=2)(design, _task(sc), design.n_wires, 1.0)
+    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(
+        design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
     return _result_row(design.n_wires, design, exact, pieces)
+
+
+def write_outputs(result: dict[str, Any], out_dir) -> list:
+    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``."""
+    import json
+    from pathlib import Path
+
+    from .plots import plot_convergence, plot_tradeoff
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    paths = [out / "result.json", out / "tradeoff.png", out / "convergence.png"]
+    paths[0].write_text(json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
+    plot_tradeoff(result, paths[1])
+    plot_convergence(result, paths[2], INFEASIBLE_RANK)
+    return paths

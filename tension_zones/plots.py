@@ -94,3 +94,50 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
     ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone",
                  fontsize=10)
     return ax
+
+
+def plot_tradeoff(result: dict, path):
+    """Issue 5: each objective term of the best design of every wire count against the count."""
+    rows = [r for r in result["per_wire_count"] if "objective" in r]
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.8))
+    n = [r["n_wires"] for r in rows]
+    feas = [r["feasible"] for r in rows]
+    for ax, key, label in zip(
+        axes,
+        ("worst_position_uncertainty_mm", "worst_deflection_mm", "objective"),
+        ("worst position uncertainty (mm)", "worst reduced deflection (mm)", "objective"),
+    ):
+        y = [r[key] for r in rows]
+        ax.plot(n, y, "-", color="0.6")
+        ax.scatter([a for a, f in zip(n, feas) if f], [b for b, f in zip(y, feas) if f],
+                   color="tab:blue", zorder=3, label="feasible")
+        ax.scatter([a for a, f in zip(n, feas) if not f], [b for b, f in zip(y, feas) if not f],
+                   color="tab:red", marker="x", zorder=3, label="infeasible")
+        ax.set_xlabel("number of wires")
+        ax.set_ylabel(label)
+        ax.set_xticks(n)
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    best = result.get("best")
+    fig.suptitle("Trade-off against the wire count"
+                 + (f" (best: {best['n_wires']} wires)" if best else " (no feasible design)"))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_convergence(result: dict, path, infeasible_rank: float):
+    """Issue 5: best-so-far exact objective per Adam step, one line per wire count (best start)."""
+    fig, ax = plt.subplots(figsize=(6.4, 4))
+    for n, hist in result["history"].items():
+        h = np.asarray(hist, dtype=float)
+        h = np.where(h >= infeasible_rank, np.nan, h)  # infeasible so far: not drawn
+        ax.plot(np.arange(1, h.size + 1), h, label=f"{n} wires")
+    ax.set_xlabel("Adam step")
+    ax.set_ylabel("best feasible objective so far")
+    ax.set_title("Convergence (best of the starts; gaps: no feasible design yet)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
