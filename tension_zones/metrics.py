@@ -142,8 +142,9 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
     """
     Jx, Jq = _masked_Jq(design, theta_L, delta, mask)
     P = pinv_tall2(Jq)  # (2, n); zero columns for slack wires
-    C = _column_cross(P)
-    det_Gp = 0.5 * jnp.sum(C * C)  # Cauchy-Binet: det(P P^T) = sum_{j<k} minor_jk^2
+    i, j = jnp.triu_indices(design.n_wires, k=1)
+    minors = P[0, i] * P[1, j] - P[1, i] * P[0, j]
+    det_Gp = jnp.sum(minors**2)  # Cauchy-Binet; exactly 0 with one non-zero column (one taut wire)
     Gp = P @ P.T
     rtol = max(3, design.n_wires) * eps_of(Jx)
     out = {}
