@@ -202,7 +202,9 @@ def _uncertainty_figure(path, theta_deg, delta_deg, results, q, dq=DQ, dq_values
     i = int(np.argmin(np.abs(theta_deg - theta_profile)))
     for n, r, colour in ((3, r3, "tab:red"), (4, r4, "tab:blue")):
         ax.plot(delta_deg, r[f"{key}_reduced"][i], "-", color=colour, label=f"{n} wires, reduced")
-        ax.plot(delta_deg, r[f"{key}_full"][i], ":", color=colour, label=f"{n} wires, traditional" + (" (= reduced off the wire lines)" if n == 4 else ""))
+        note = " (= reduced off the wire lines)" if n == 4 else ""
+        ax.plot(delta_deg, r[f"{key}_full"][i], ":", color=colour,
+                label=f"{n} wires, traditional{note}")
     ax.set_xlabel(r"bending direction $\delta$ (deg)")
     ax.set_ylabel(lab)
     ax.set_xticks(np.arange(0, 361, 60))
