@@ -137,9 +137,13 @@ def _heat(ax, fig, theta_deg, delta_deg, Z, title, label, cmap="viridis", vmin=N
     return m
 
 
-def _measure_figure(path, theta_deg, delta_deg, r3, r4, name, label_v, label_w, fig_title):
+def measure_figure(theta_deg, delta_deg, r3, r4, name, label_v, label_w, fig_title, path=None):
     """Figs. 9/10 layout: rows translation/orientation; columns (a) traditional 3 wires,
-    (b) reduced 3 wires, (c) reduced 4 wires, (d) reduced 3 minus 4 wires."""
+    (b) reduced 3 wires, (c) reduced 4 wires, (d) reduced 3 minus 4 wires.
+
+    ``r3``, ``r4``: sweeps of :func:`tension_zones.metrics.pose_metrics`; ``name`` one of ``kci``,
+    ``sigma_min``, ``sigma_min_nz``. Saved to ``path`` (and closed) if given, else returned.
+    """
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(2, 4, figsize=(19, 8.2), constrained_layout=True)
@@ -158,15 +162,24 @@ def _measure_figure(path, theta_deg, delta_deg, r3, r4, name, label_v, label_w, 
               f"({letters[3]}) {kind}: reduced, 3 wires minus 4 wires", "difference " + label,
               cmap="RdBu_r", centre=0.0)
     fig.suptitle(fig_title, fontsize=13)
+    return _save(fig, path)
+
+
+def _save(fig, path):
+    import matplotlib.pyplot as plt
+
+    if path is None:
+        return fig
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
 
 
-def _uncertainty_figure(path, theta_deg, delta_deg, results, q, dq=DQ, dq_values=DQ_SWEEP,
-                        fig_no=11, theta_profile=45.0):
-    """Figs. 11/12: (a) 3 wires and (b) 4 wires (reduced), (c) sensitivity to dq, (d) 3 over 4,
-    (e) reduced over traditional for 3 wires, (f) a delta profile."""
+def uncertainty_figure(theta_deg, delta_deg, results, q, dq=DQ, dq_values=DQ_SWEEP, fig_no=11,
+                       theta_profile=45.0, path=None):
+    """Figs. 11/12 for ``q`` = ``"position"`` or ``"orientation"``: (a) 3 wires and (b) 4 wires
+    (reduced), (c) sensitivity to dq, (d) 3 over 4, (e) reduced over traditional for 3 wires,
+    (f) a delta profile. ``results`` as returned by :func:`paper_sweeps`. Saved to ``path`` if given."""
     import matplotlib.pyplot as plt
 
     key, unit = QUANTITIES[q]
@@ -213,9 +226,7 @@ def _uncertainty_figure(path, theta_deg, delta_deg, results, q, dq=DQ, dq_values
     ax.legend(fontsize=8)
     fig.suptitle(f"Fig. {fig_no}: end-disk {q} uncertainty from joint-level uncertainty "
                  f"(L = {LENGTH:g} mm, r = {PITCH_RADIUS:g} mm)", fontsize=13)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def reproduce_kinematics(out: Path, summary: dict, quiet: bool) -> list[Path]:
@@ -223,21 +234,23 @@ def reproduce_kinematics(out: Path, summary: dict, quiet: bool) -> list[Path]:
     theta_deg, delta_deg, results = paper_sweeps(quiet=quiet)
     r3, r4 = results[(3, DQ)], results[(4, DQ)]
     written = [
-        _measure_figure(out / "fig9_kci.png", theta_deg, delta_deg, r3, r4, "kci", "KCI", "KCI",
-                        "Fig. 9: kinematic conditioning index (KCI) of the translational (top) and "
-                        "orientational (bottom) Jacobians"),
-        _measure_figure(out / "fig10_sigma_min.png", theta_deg, delta_deg, r3, r4, "sigma_min",
-                        r"$\sigma_{min}$ (mm/mm)", r"$\sigma_{min}$ (rad/mm)",
-                        r"Fig. 10: minimal singular value $\sigma_{min} = \sigma_2$ "
-                        f"(0 where the rank is 1), L = {LENGTH:g} mm, r = {PITCH_RADIUS:g} mm"),
-        _measure_figure(out / "fig10_sigma_min_nz.png", theta_deg, delta_deg, r3, r4,
-                        "sigma_min_nz", r"$\sigma_{min,nz}$ (mm/mm)", r"$\sigma_{min,nz}$ (rad/mm)",
-                        "Fig. 10, other reading: smallest non-zero singular value (the single "
-                        "actuated direction's gain in one-wire zones)"),
-        _uncertainty_figure(out / "fig11_position_uncertainty.png", theta_deg, delta_deg, results,
-                            "position", fig_no=11),
-        _uncertainty_figure(out / "fig12_orientation_uncertainty.png", theta_deg, delta_deg,
-                            results, "orientation", fig_no=12),
+        measure_figure(theta_deg, delta_deg, r3, r4, "kci", "KCI", "KCI",
+                       "Fig. 9: kinematic conditioning index (KCI) of the translational (top) and "
+                       "orientational (bottom) Jacobians", path=out / "fig9_kci.png"),
+        measure_figure(theta_deg, delta_deg, r3, r4, "sigma_min",
+                       r"$\sigma_{min}$ (mm/mm)", r"$\sigma_{min}$ (rad/mm)",
+                       r"Fig. 10: minimal singular value $\sigma_{min} = \sigma_2$ "
+                       f"(0 where the rank is 1), L = {LENGTH:g} mm, r = {PITCH_RADIUS:g} mm",
+                       path=out / "fig10_sigma_min.png"),
+        measure_figure(theta_deg, delta_deg, r3, r4, "sigma_min_nz",
+                       r"$\sigma_{min,nz}$ (mm/mm)", r"$\sigma_{min,nz}$ (rad/mm)",
+                       "Fig. 10, other reading: smallest non-zero singular value (the single "
+                       "actuated direction's gain in one-wire zones)",
+                       path=out / "fig10_sigma_min_nz.png"),
+        uncertainty_figure(theta_deg, delta_deg, results, "position", fig_no=11,
+                           path=out / "fig11_position_uncertainty.png"),
+        uncertainty_figure(theta_deg, delta_deg, results, "orientation", fig_no=12,
+                           path=out / "fig12_orientation_uncertainty.png"),
     ]
     summary["uncertainty"] = uncertainty_summary(results)
     summary["kinematics"] = kinematics_summary(results)

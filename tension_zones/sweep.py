@@ -121,7 +121,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
 
 
 def _progress(total, desc, disable):
-    from tqdm.auto import tqdm
+    from tqdm import tqdm
 
     return tqdm(total=total, desc=desc or "sweep", unit="pose", unit_scale=True, disable=disable,
                 leave=False, dynamic_ncols=True)
