@@ -109,8 +109,18 @@ def kinematics_summary(results, dq=DQ) -> dict:
                 for n, r in ((3, r3), (4, r4))}
             s[f"three_gt_four_{reading}"] = _frac(r3[f"{name}_{part}_reduced"],
                                                   r4[f"{name}_{part}_reduced"])
+        s["three_gt_four_sigma_2_full"] = _frac(r3[f"sigma_min_{part}_full"],
+                                                r4[f"sigma_min_{part}_full"])
+        s["three_gt_four_sigma_max"] = _frac(_sigma_max(r3, part), _sigma_max(r4, part))
         out["translation" if part == "v" else "orientation"] = s
     return out
+
+
+def _sigma_max(r, part, mode="reduced"):
+    """sigma_1 from the sweep: sigma_2 / KCI where the rank is 2, else the one non-zero value."""
+    kci = r[f"kci_{part}_{mode}"]
+    return np.where(kci > 0, r[f"sigma_min_{part}_{mode}"] / np.where(kci > 0, kci, 1.0),
+                    r[f"sigma_min_nz_{part}_{mode}"])
 
 
 # --------------------------------------------------------------------------------------------
