@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._numerics import eps_of, pinv_tall2
 from .design import Design
@@ -63,9 +64,9 @@ def _column_cross(P):
     return P[0][:, None] * P[1][None, :] - P[1][:, None] * P[0][None, :]
 
 
-#: Generators closer to parallel than this (|sin| of their angle) count as parallel in
-#: :func:`zonogon_vertices`; the bound it returns is then exact to about this relative error.
-PARALLEL_TOL = 1e3 * float(jnp.finfo(jnp.float64).eps)
+#: Generators closer to parallel than ``PARALLEL_TOL * eps`` (|sin| of their angle; eps of the
+#: dtype) count as parallel in :func:`zonogon_vertices`; the bound is exact to about that relative error.
+PARALLEL_TOL = 1e3
 
 
 def _sv2(A, Gp, det_Gp):
@@ -100,17 +101,18 @@ def zonogon_vertices(G):
     support point in the direction normal to ``g_j`` is ``w_j = sum_k sign(g_j x g_k) g_k`` over the
     generators not parallel to ``g_j``; the edge there is ``w_j +- (sum of the generators parallel to
     ``g_j``, each signed along ``g_j``)``. Zero generators (slack wires) contribute nothing; parallel
-    generators (the straight pose) are exact. Parallel means ``|g_j x g_k| <= PARALLEL_TOL |g_j||g_k|``,
+    generators (the straight pose) are exact. Parallel means ``|g_j x g_k| <= 1e3 eps |g_j||g_k|``,
     a test that does not depend on how the compiler rounds the cross product.
     """
     C = _column_cross(G)
-    D = G.T @ G
+    D = G[0][:, None] * G[0][None, :] + G[1][:, None] * G[1][None, :]  # Gram; elementwise (vmap-fast)
     nrm = jnp.sqrt(jax.lax.stop_gradient(jnp.diagonal(D)))
-    parallel = jnp.abs(C) <= PARALLEL_TOL * nrm[:, None] * nrm[None, :]  # incl. k = j
+    tol = PARALLEL_TOL * eps_of(G)
+    parallel = jnp.abs(C) <= tol * nrm[:, None] * nrm[None, :]  # incl. k = j
     side = jnp.where(parallel, 0.0, jnp.sign(C))
     edge = jnp.where(parallel, jnp.sign(D), 0.0)  # the edge along g_j, signed consistently
     coef = jnp.concatenate([side + edge, side - edge], axis=0)  # (2n, n)
-    return coef @ G.T
+    return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
 
 
 def _masked_Jq(design: Design, theta_L, delta, mask):
@@ -142,10 +144,12 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
     """
     Jx, Jq = _masked_Jq(design, theta_L, delta, mask)
     P = pinv_tall2(Jq)  # (2, n); zero columns for slack wires
-    i, j = jnp.triu_indices(design.n_wires, k=1)
-    minors = P[0, i] * P[1, j] - P[1, i] * P[0, j]
-    det_Gp = jnp.sum(minors**2)  # Cauchy-Binet; exactly 0 with one non-zero column (one taut wire)
-    Gp = P @ P.T
+    # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
+    # exactly 0); exactly 0 with one non-zero column (one taut wire)
+    upper = np.triu(np.ones((design.n_wires,) * 2, bool), k=1)
+    det_Gp = jnp.sum(jnp.where(upper, _column_cross(P), 0.0) ** 2)
+    Gp = jnp.array([[jnp.sum(P[0] * P[0]), jnp.sum(P[0] * P[1])],
+                    [jnp.sum(P[0] * P[1]), jnp.sum(P[1] * P[1])]])
     rtol = max(3, design.n_wires) * eps_of(Jx)
     out = {}
     for part, A in (("v", Jx[:3]), ("w", Jx[3:])):
@@ -156,7 +160,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
     # Paper Eqs. 17-19 without the 3^n columns: the box maps to the zonogon P dq [-1, 1]^n in the
     # configuration space; a norm of J_xpsi z is convex in z, so its maximum is at a vertex.
     V = zonogon_vertices(P * jnp.asarray(dq, P.dtype))  # (2n, 2)
-    dX = V @ Jx.T  # (2n, 6)
+    dX = V[:, :1] * Jx[:, 0] + V[:, 1:] * Jx[:, 1]  # (2n, 6) = V @ Jx.T, elementwise (vmap-fast)
     out["dp_max"] = jnp.max(_norm0(dX[:, :3]))
     out["dw_max"] = jnp.max(_norm0(dX[:, 3:]))
     return out
