@@ -118,7 +118,11 @@ def zonogon_vertices(G):
 def _masked_Jq(design: Design, theta_L, delta, mask):
     Jx, Jq = jacobians(design, theta_L, delta)
     if mask is not None:
-        Jq = Jq * jnp.asarray(mask, Jq.dtype)[:, None]
+        mask = jnp.asarray(mask, Jq.dtype)
+        if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
+            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
+                             f"got {mask.shape}")
+        Jq = Jq * mask[:, None]
     return Jx, Jq
 
 

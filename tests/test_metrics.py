@@ -276,3 +276,11 @@ def test_gradients_match_the_scaling_laws(delta_deg):
     vals = np.asarray(vals)
     assert r * float(grads[2]) == pytest.approx(float(b @ vals), rel=1e-9)
     assert L * float(grads[4]) == pytest.approx(float(a @ vals), rel=1e-9)
+
+
+def test_bad_mask_is_a_clear_error():
+    d = tz.Design(4, 20.0, 2.0)
+    with pytest.raises(ValueError, match=r"mask must have shape \(4,\) for 4 wires"):
+        pose_measures(d, 0.5, 0.1, 0.4, jnp.ones(3))
+    with pytest.raises(ValueError, match="mask must have shape"):
+        pose_measures(d, 0.5, 0.1, 0.4, jnp.ones((4, 1)))
