@@ -233,7 +233,7 @@ def uncertainty_figure(theta_deg, delta_deg, results, q, dq=DQ, dq_values=DQ_SWE
     ax.set_xticks(np.arange(0, 361, 60))
     ax.set_title(f"(f) profile at $\\theta_L$ = {theta_deg[i]:g} deg, dq = {dq} mm", fontsize=10)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2)
     fig.suptitle(f"Fig. {fig_no}: end-disk {q} uncertainty from joint-level uncertainty "
                  f"(L = {LENGTH:g} mm, r = {PITCH_RADIUS:g} mm)", fontsize=13)
     return _save(fig, path)
