@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import assume, given
 from hypothesis import strategies as st
 
 import tension_zones as tz
@@ -190,6 +190,23 @@ def test_scaling_in_length_and_pitch_radius(theta_L, delta, L, r):
         assert float(b[key]) == pytest.approx(f * float(a[key]), rel=1e-10, abs=1e-14)
     for key in ("kci_v", "kci_w"):
         assert 0.0 <= float(a[key]) <= 1.0
+
+
+@given(st.lists(st.floats(0.0, 359.0), min_size=3, max_size=3), st.floats(0.0, 1.48),
+       st.floats(0.0, 2 * np.pi), st.floats(0.05, 2.0))
+def test_any_three_wire_layout_matches_reference(angles_deg, theta_L, delta, dq):
+    """Property test over the space of three-wire layouts and poses (reduced and full)."""
+    a = np.sort(np.asarray(angles_deg))
+    gaps = np.diff(np.concatenate([a, [a[0] + 360.0]]))
+    assume(gaps.min() > 1.0)
+    d = tz.Design(3, 20.0, 2.0, wire_angles=rad(a))
+    for reduced in (False, True):
+        got = _measures3(d, theta_L, delta, dq, reduced)
+        ref = ref_measures(20.0, 2.0, rad(a), theta_L, delta, dq, reduced)
+        for k in MEASURES:
+            scale = max(abs(ref[k]), 1.0 if k.startswith("kci") else 0.0,
+                        ref[f"sigma_min_nz_{k[-1]}"] if k.startswith("sigma_min_") else 0.0)
+            assert abs(float(got[k]) - ref[k]) <= 1e-9 * scale, (k, reduced)
 
 
 _zonogon = jax.jit(zonogon_vertices)

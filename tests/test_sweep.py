@@ -156,7 +156,9 @@ def test_cli_sweep_uneven_angles_steps_and_dq(tmp_path):
     common = ["sweep", "--wires", "4", "--length", "30", "--pitch-radius", "3",
               "--angles", "0,80,180,260", "--theta-step", "17", "--delta-step", "45", "--quiet"]
     assert main(common + ["--dq", "0.2", "--out", str(a)]) == 0
+    n_compiled = compiled_chunk_count()
     assert main(common + ["--dq", "1.0", "--out", str(b)]) == 0
+    assert compiled_chunk_count() == n_compiled  # a new dq is a new value, not a new program
     za, zb = np.load(a), np.load(b)
     assert za["n_taut"].shape == (6, 9)
     np.testing.assert_allclose(zb["dp_max_reduced"], 5 * za["dp_max_reduced"], rtol=1e-12)
