@@ -10,12 +10,12 @@ deg step 2.5, reduced Jacobians unless "full" is said, dq = 0.4 mm unless a dq s
 
 * ``reduced_over_full_max[n]``: max over the grid of ``dp_max_reduced / dp_max_full`` for n wires
   (how much the traditional Jacobian underestimates the position uncertainty, at worst).
-* ``three_over_four_max[q]``: max over the grid of ``dq3 / dq4`` (q = position ``dp_max`` or
-  orientation ``dw_max``, pointwise, same pose), leaving out the zero-width directions where the
+* ``three_over_four_max[q]``: max over the grid of ``B3 / B4``, the bounds of the two designs at
+  the same pose (``B`` = ``dp_max`` for q = position, ``dw_max`` for orientation), leaving out the zero-width directions where the
   four-wire design has a single taut wire (delta = k 90 deg, MODEL.md boundary rule); the
   unrestricted value is reported as ``three_over_four_max_all``.
 * ``sensitivity_three_over_four[q]``: ratio of the slopes (least squares over dq = 0.2..1.0 mm) of
-  the workspace-maximal uncertainty ``max_grid dq(dq)``, three wires over four.
+  the workspace-maximal bound ``max_grid B(dq)``, three wires over four.
 """
 
 from __future__ import annotations
