@@ -21,6 +21,8 @@ from .kinematics import (
     wire_lengths,
     wire_lengths_b,
 )
+from .metrics import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
+from .sweep import grid_deg, sweep_grid, sweep_poses
 from .zones import (
     BOUNDARY_TOL,
     TEMPERATURE,
@@ -38,6 +40,7 @@ __version__ = "0.1.0"
 __all__ = [
     "BOUNDARY_TOL",
     "DEFAULT_BACKBONE_EI",
+    "DEFAULT_DQ",
     "DEFAULT_WIRE_STIFFNESS",
     "TEMPERATURE",
     "THETA_0",
@@ -50,11 +53,16 @@ __all__ = [
     "Sector",
     "TensionMap",
     "b_to_psi",
+    "grid_deg",
     "jacobians",
     "over_grid",
+    "pose_measures",
+    "pose_metrics",
     "psi_to_b",
     "reduced_J_qpsi",
     "reduced_J_xq",
+    "sweep_grid",
+    "sweep_poses",
     "tension_map",
     "tension_mask",
     "tension_score",
@@ -62,4 +70,5 @@ __all__ = [
     "tip_pose_b",
     "wire_lengths",
     "wire_lengths_b",
+    "zonogon_vertices",
 ]

@@ -99,6 +99,63 @@ def cmd_optimize(args) -> None:
         for p in paths:
             print(f"wrote {p}")
 
+# ---- sweep (issue 3): workspace performance maps ------------------------------------------------
+def _kinematics_measure(args):
+    """MODEL.md Sec. 3 measures, full and reduced: ``(per-pose function, extra args)``."""
+    from .metrics import pose_metrics
+
+    return pose_metrics, (args.dq,)
+
+
+#: Per-pose measures ``tension-zones sweep --measure`` can sweep: name -> builder(args) returning
+#: ``(fn(design, theta_L, delta, *extra) -> dict, extra)``. Another measure is one more entry.
+SWEEP_MEASURES = {"kinematics": _kinematics_measure}
+
+
+def _positive(name: str, value: float) -> float:
+    if not (np.isfinite(value) and value > 0):
+        raise CLIError(f"{name} must be a positive number, got {value:g}")
+    return value
+
+
+def cmd_sweep(args) -> None:
+    from .sweep import grid_deg, sweep_grid
+
+    out = _out_path(args.out, ".npz")
+    design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
+    for name in ("theta_step", "delta_step", "dq"):
+        _positive("--" + name.replace("_", "-"), getattr(args, name))
+    theta_deg = grid_deg(85.0, args.theta_step)  # paper grid: 0..85 deg, 0..360 deg, ends included
+    delta_deg = grid_deg(360.0, args.delta_step)
+    fn, extra = SWEEP_MEASURES[args.measure](args)
+    res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
+                     quiet=args.quiet, desc=f"sweep {args.measure}")
+    th, de = np.meshgrid(theta_deg, delta_deg, indexing="ij")
+    np.savez(out, theta_L_deg=th, delta_deg=de, **res)
+    if not args.quiet:
+        print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
+
+
+def _add_sweep_parser(sub) -> None:
+    s = sub.add_parser("sweep", help="sweep performance measures over the workspace into a .npz")
+    s.add_argument("--wires", type=int, required=True, help="number of wires (>= 3)")
+    s.add_argument("--length", type=float, required=True, help="segment length L (mm)")
+    s.add_argument("--pitch-radius", type=float, required=True, help="wire pitch radius r (mm)")
+    s.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
+    s.add_argument("--theta-step", type=float, default=5.0, help="theta_L step (deg), 0..85 (default 5)")
+    s.add_argument("--delta-step", type=float, default=2.5, help="delta step (deg), 0..360 (default 2.5)")
+    s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
+    s.add_argument("--measure", choices=sorted(SWEEP_MEASURES), default="kinematics",
+                   help="which per-pose measures to sweep (default: kinematics)")
+    s.add_argument("--out", required=True, help="output .npz file")
+    s.add_argument("--quiet", action="store_true", help="no progress bar or messages")
+    s.set_defaults(func=cmd_sweep)
+
+
+# ---- end sweep (issue 3) -----------------------------------------------------------------------
+
+
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
@@ -124,6 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default="reproduce_out", help="output folder (default: reproduce_out)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     r.set_defaults(func=cmd_reproduce)
+    _add_sweep_parser(sub)  # issue 3
     return p
 
 

@@ -45,7 +45,16 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     return written
 
 
-STEPS = [("tension maps (Figs. 5, 7)", _tension_maps)]
+def _kinematics(out: Path, summary: dict, quiet: bool) -> list[Path]:
+    from .figures_kinematics import reproduce_kinematics
+
+    return reproduce_kinematics(out, summary, quiet)
+
+
+STEPS = [
+    ("tension maps (Figs. 5, 7)", _tension_maps),
+    ("kinematic conditioning and pose uncertainty (Sec. 6.1, Figs. 9-12)", _kinematics),
+]
 
 
 def reproduce(out: Path, quiet: bool = False) -> dict:

@@ -1,0 +1,185 @@
+"""Single-pose performance measures, full and reduced (MODEL.md Sec. 3; paper Secs. 4 and 6.1).
+
+Every function here is written for **one pose** ``(theta_L, delta)`` (rad) and is pure, so it can be
+``jit``-ed, ``vmap``-ed (:func:`tension_zones.over_grid`, :mod:`tension_zones.sweep`) and
+differentiated. ``mask = None`` means the traditional (push-pull, "full") Jacobian; a 0/1 ``(n,)``
+mask keeps only the taut wires' rows (the reduced Jacobian, paper Sec. 3.3).
+
+Structure used throughout: ``J_xq = J_xpsi P`` with ``P = pinv(J~_qpsi)`` (2 x n), so each 3 x n
+block ``J_v = J_xpsi[:3] P`` (or ``J_w``) has rank <= 2 and its two largest singular values follow in
+closed form from 2x2 quantities (:func:`_sv2`), and the joint-uncertainty box ``dq [-1, 1]^n`` maps
+to the zonogon ``P dq [-1, 1]^n`` in the 2-D configuration space, whose 2n vertices carry the
+maximum of any convex norm (:func:`zonogon_vertices`). No SVD, no ``3^n`` or ``2^n`` enumeration.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._numerics import eps_of, pinv_tall2
+from .design import Design
+from .kinematics import jacobians
+from .zones import tension_mask
+
+#: The paper's headline joint-level uncertainty (mm), Figs. 11-12.
+DEFAULT_DQ = 0.4
+#: Names of the per-mode measures returned by :func:`pose_measures`.
+MEASURES = (
+    "kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "sigma_min_nz_v", "sigma_min_nz_w",
+    "dp_max", "dw_max",
+)
+MODES = ("full", "reduced")
+
+
+# --------------------------------------------------------------------------------------------
+# Guarded elementary functions (double-where: finite values *and* gradients at 0)
+# --------------------------------------------------------------------------------------------
+def _sqrt0(x):
+    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0."""
+    pos = x > 0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
+def _div0(a, b):
+    """a / b, and 0 where b == 0 (gradient finite)."""
+    nz = b != 0
+    return jnp.where(nz, a / jnp.where(nz, b, 1.0), 0.0)
+
+
+def _norm0(x, axis=-1):
+    return _sqrt0(jnp.sum(x * x, axis=axis))
+
+
+# --------------------------------------------------------------------------------------------
+# Building blocks
+# --------------------------------------------------------------------------------------------
+def _column_cross(P):
+    """``C[j, k] = P[:, j] x P[:, k]`` (2-D cross product) for a (2, n) matrix: (n, n).
+
+    Antisymmetric in exact arithmetic; compiled code may fuse it into FMAs, so callers never rely on
+    ``C[j, j] == 0`` or ``C[j, k] == -C[k, j]`` bit for bit.
+    """
+    return P[0][:, None] * P[1][None, :] - P[1][:, None] * P[0][None, :]
+
+
+#: Generators closer to parallel than ``PARALLEL_TOL * eps`` (|sin| of their angle; eps of the
+#: dtype) count as parallel in :func:`zonogon_vertices`; the bound is exact to about that relative error.
+PARALLEL_TOL = 1e3
+
+
+def _sv2(A, Gp, det_Gp):
+    """The two largest singular values ``(s1, s2)`` of ``A P`` with ``Gp = P P^T`` (2x2).
+
+    ``A`` (3, 2) is a block of ``J_xpsi``; ``det_Gp`` is ``det(P P^T)`` by Cauchy-Binet (exactly 0 when
+    at most one wire is taut). With the Cholesky factor ``R`` of ``A^T A`` (``A = Q R``) the non-zero
+    singular values of ``A P`` are the square roots of the eigenvalues of the symmetric 2x2
+    ``S = R Gp R^T``; ``l1 = (tr S + sqrt((S00 - S11)^2 + 4 S01^2)) / 2`` and, by
+    ``det S = det(A^T A) det(Gp)``, ``l2 = |a1 x a2|^2 det(Gp) / l1`` -- both free of cancellation, and
+    ``l2`` exactly 0 for rank one (one taut wire, or the straight pose).
+    """
+    a1, a2 = A[:, 0], A[:, 1]
+    h00 = jnp.dot(a1, a1)
+    det_H = jnp.sum(jnp.cross(a1, a2) ** 2)  # det(A^T A) without cancellation
+    r00 = _sqrt0(h00)
+    r01 = _div0(jnp.dot(a1, a2), r00)
+    r11 = _div0(_sqrt0(det_H), r00)
+    s00 = r00 * r00 * Gp[0, 0] + 2 * r00 * r01 * Gp[0, 1] + r01 * r01 * Gp[1, 1]
+    s01 = r00 * r11 * Gp[0, 1] + r01 * r11 * Gp[1, 1]
+    s11 = r11 * r11 * Gp[1, 1]
+    l1 = 0.5 * (s00 + s11 + _sqrt0((s00 - s11) ** 2 + 4 * s01 * s01))
+    l2 = jnp.minimum(_div0(det_H * det_Gp, l1), l1)
+    return _sqrt0(l1), _sqrt0(l2)
+
+
+def zonogon_vertices(G):
+    """Vertices of the centred zonogon ``{G x : x in [-1, 1]^n}`` for generators ``G`` (2, n).
+
+    Returns (2n, 2): one vertex of each pair ``+-v`` (the zonogon is centrally symmetric, so a norm's
+    maximum over these equals its maximum over the whole zonogon). For each generator ``g_j`` the
+    support point in the direction normal to ``g_j`` is ``w_j = sum_k sign(g_j x g_k) g_k`` over the
+    generators not parallel to ``g_j``; the edge there is ``w_j +- (sum of the generators parallel to
+    ``g_j``, each signed along ``g_j``)``. Zero generators (slack wires) contribute nothing; parallel
+    generators (the straight pose) are exact. Parallel means ``|g_j x g_k| <= 1e3 eps |g_j||g_k|``,
+    a test that does not depend on how the compiler rounds the cross product.
+    """
+    C = _column_cross(G)
+    D = G[0][:, None] * G[0][None, :] + G[1][:, None] * G[1][None, :]  # Gram; elementwise (vmap-fast)
+    nrm = jnp.sqrt(jax.lax.stop_gradient(jnp.diagonal(D)))
+    tol = PARALLEL_TOL * eps_of(G)
+    parallel = jnp.abs(C) <= tol * nrm[:, None] * nrm[None, :]  # incl. k = j
+    side = jnp.where(parallel, 0.0, jnp.sign(C))
+    edge = jnp.where(parallel, jnp.sign(D), 0.0)  # the edge along g_j, signed consistently
+    coef = jnp.concatenate([side + edge, side - edge], axis=0)  # (2n, n)
+    return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
+
+
+def _masked_Jq(design: Design, theta_L, delta, mask):
+    Jx, Jq = jacobians(design, theta_L, delta)
+    if mask is not None:
+        mask = jnp.asarray(mask, Jq.dtype)
+        if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
+            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
+                             f"got {mask.shape}")
+        Jq = Jq * mask[:, None]
+    return Jx, Jq
+
+
+# --------------------------------------------------------------------------------------------
+# Public single-pose measures
+# --------------------------------------------------------------------------------------------
+def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
+    """Every measure of MODEL.md Sec. 3 at one pose, for one Jacobian (full or reduced).
+
+    Args:
+        design: the segment.
+        theta_L, delta: the pose (rad), scalars.
+        dq: joint-level uncertainty bound (mm), scalar; the box is ``dq [-1, 1]^n`` (paper Eq. 17).
+        mask: ``None`` (traditional, all wires) or (n,) 0/1 taut mask (reduced, paper Sec. 3.3).
+
+    Returns a dict of scalars (the keys of :data:`MEASURES`):
+        ``kci_v``, ``kci_w``: ``sigma_2 / sigma_1`` of ``J_v = J_xq[:3]`` and ``J_w = J_xq[3:]``
+        (0 when the rank is below 2); ``sigma_min_v`` (mm/mm), ``sigma_min_w`` (rad/mm):
+        ``sigma_2``; ``sigma_min_nz_v``, ``sigma_min_nz_w``: the smallest *non-zero* singular value
+        (``sigma_1`` where ``sigma_2 <= max(3, n) eps sigma_1``, NumPy's rank rule);
+        ``dp_max`` (mm), ``dw_max`` (rad): the largest ``||dx[:3]||`` and ``||dx[3:]||`` with
+        ``dx = J_xpsi pinv(J~_qpsi) dq_vec`` over the box (paper Eqs. 17-19), exact.
+    """
+    Jx, Jq = _masked_Jq(design, theta_L, delta, mask)
+    P = pinv_tall2(Jq)  # (2, n); zero columns for slack wires
+    # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
+    # exactly 0); exactly 0 with one non-zero column (one taut wire)
+    upper = np.triu(np.ones((design.n_wires,) * 2, bool), k=1)
+    det_Gp = jnp.sum(jnp.where(upper, _column_cross(P), 0.0) ** 2)
+    Gp = jnp.array([[jnp.sum(P[0] * P[0]), jnp.sum(P[0] * P[1])],
+                    [jnp.sum(P[0] * P[1]), jnp.sum(P[1] * P[1])]])
+    rtol = max(3, design.n_wires) * eps_of(Jx)
+    out = {}
+    for part, A in (("v", Jx[:3]), ("w", Jx[3:])):
+        s1, s2 = _sv2(A, Gp, det_Gp)
+        out[f"kci_{part}"] = _div0(s2, s1)
+        out[f"sigma_min_{part}"] = s2
+        out[f"sigma_min_nz_{part}"] = jnp.where(s2 > rtol * s1, s2, s1)
+    # Paper Eqs. 17-19 without the 3^n columns: the box maps to the zonogon P dq [-1, 1]^n in the
+    # configuration space; a norm of J_xpsi z is convex in z, so its maximum is at a vertex.
+    V = zonogon_vertices(P * jnp.asarray(dq, P.dtype))  # (2n, 2)
+    dX = V[:, :1] * Jx[:, 0] + V[:, 1:] * Jx[:, 1]  # (2n, 6) = V @ Jx.T, elementwise (vmap-fast)
+    out["dp_max"] = jnp.max(_norm0(dX[:, :3]))
+    out["dw_max"] = jnp.max(_norm0(dX[:, 3:]))
+    return out
+
+
+def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
+    """Full and reduced measures at one pose, flat: ``{"n_taut", "<measure>_full", "<measure>_reduced"}``.
+
+    The keys are those of the ``tension-zones sweep`` file (``kci_v_full``, ``dp_max_reduced``, ...);
+    ``n_taut`` is the number of wires in tension (MODEL.md Sec. 2, boundary rule included). The
+    reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`.
+    """
+    mask = tension_mask(design, delta)
+    out = {"n_taut": jnp.sum(mask > 0.5).astype(jnp.int32)}
+    for mode, m in (("full", None), ("reduced", mask)):
+        for k, v in pose_measures(design, theta_L, delta, dq, m).items():
+            out[f"{k}_{mode}"] = v
+    return out
