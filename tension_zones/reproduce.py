@@ -45,7 +45,14 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     return written
 
 
+def _compliance(out: Path, summary: dict, quiet: bool) -> list[Path]:
+    from .figures_compliance import compliance_step
+
+    return compliance_step(out, summary, quiet)
+
+
 STEPS = [("tension maps (Figs. 5, 7)", _tension_maps)]
+STEPS.append(("compliance (Sec. 6.2: identification, Figs. 13-14, Tables 1-2)", _compliance))
 
 
 def reproduce(out: Path, quiet: bool = False) -> dict:
