@@ -195,19 +195,28 @@ def stiffness_psi(design: Design, theta_L, delta, wrench, tau, mask=None):
     return hess_U + wire_geo - load_geo + design.wire_stiffness * Jq.T @ Jq
 
 
+def _load_terms_b(design: Design, b, w):
+    """``(J_xb (6, 2), d(J_xb^T w)/db (2, 2))`` from one forward-mode pass."""
+    Jx_T_w = lambda bb: (J_xb(design, bb).T @ w, J_xb(design, bb))  # noqa: E731
+    load_geo, Jx = jax.jacfwd(Jx_T_w, has_aux=True)(b)
+    return Jx, load_geo
+
+
+def _K_b(design: Design, load_geo, mask):
+    Jq = J_qb(design)
+    if mask is not None:
+        Jq = Jq * mask[:, None]
+    EI, L = design.backbone_EI, design.length
+    return EI / L * jnp.eye(2, dtype=load_geo.dtype) - load_geo + design.wire_stiffness * Jq.T @ Jq
+
+
 def stiffness_b(design: Design, b, wrench, mask=None):
     """Stiffness in bending-vector coordinates ``K_b`` (2, 2), N mm/rad^2; finite everywhere.
 
     The four terms of :func:`stiffness_psi` in ``b``: ``hess U = EI/L I``; the wire term vanishes
     (wire lengths are linear in ``b``); ``-d(J_xb^T w)/db``; ``k_w J~_qb^T J~_qb``.
     """
-    w = as_wrench(wrench)
-    EI, L = design.backbone_EI, design.length
-    load_geo = jax.jacfwd(lambda bb: J_xb(design, bb).T @ w)(b)
-    Jq = J_qb(design, b)
-    if mask is not None:
-        Jq = Jq * mask[:, None]
-    return EI / L * jnp.eye(2, dtype=b.dtype) - load_geo + design.wire_stiffness * Jq.T @ Jq
+    return _K_b(design, _load_terms_b(design, b, as_wrench(wrench))[1], mask)
 
 
 def _solve2(K, B):
@@ -223,25 +232,27 @@ def _solve2(K, B):
     return inv @ B, ok
 
 
+def _norm(x):
+    """Euclidean norm with a zero (not NaN) gradient at ``x = 0`` (double ``where``)."""
+    s = jnp.sum(x * x)
+    nz = s > 0
+    return jnp.where(nz, jnp.sqrt(jnp.where(nz, s, 1.0)), 0.0)
+
+
+def _b_of(design, theta_L, delta):
+    return psi_to_b(*(jnp.asarray(x, design.length.dtype) for x in (theta_L, delta)))
+
+
 def compliance(design: Design, theta_L, delta, wrench, mask=None):
     """Task-space compliance ``C_x = J_xpsi K_psi^{-1} J_xpsi^T`` (6, 6) at one pose, and ``ok``.
 
     Evaluated as ``J_xb K_b^{-1} J_xb^T`` (equal at an equilibrium, finite at the straight pose).
     ``ok`` is False where ``K`` is not positive definite (the compliance is then zeros: flag it).
+    ``mask`` (n,) 0/1 selects the wires of ``J~`` (``None``: all wires, traditional).
     """
-    b = psi_to_b(*(jnp.asarray(x, design.length.dtype) for x in (theta_L, delta)))
-    Jx = J_xb(design, b)
-    X, ok = _solve2(stiffness_b(design, b, wrench, mask), Jx.T)
+    Jx, load_geo = _load_terms_b(design, _b_of(design, theta_L, delta), as_wrench(wrench))
+    X, ok = _solve2(_K_b(design, load_geo, mask), Jx.T)
     return Jx @ X, ok
-
-
-def _deflection(design, theta_L, delta, w, mask):
-    C, ok = compliance(design, theta_L, delta, w, mask)
-    dx = C @ w
-    nan = jnp.nan
-    mm = jnp.where(ok, jnp.linalg.norm(dx[:3]), nan)
-    deg = jnp.where(ok, jnp.degrees(jnp.linalg.norm(dx[3:])), nan)
-    return mm, deg
 
 
 def compliance_pose(design: Design, theta_L, delta, wrench):
@@ -255,18 +266,26 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     push) or a stiffness is not positive definite, the deflections and tensions are NaN.
     """
     w = as_wrench(wrench)
-    sol = tensions(design, theta_L, delta, w)
+    b = _b_of(design, theta_L, delta)
+    A, rhs = equilibrium_b(design, b, w)
+    sol = min_norm_tensions(A, rhs, design.preload)
     mask = taut_mask(design, sol.tau)
-    out = {"tensions": jnp.where(sol.feasible, sol.tau, jnp.nan)}
+    Jx, load_geo = _load_terms_b(design, b, w)
+    feas = sol.feasible
+    out = {"tensions": jnp.where(feas, sol.tau, jnp.nan)}
     for mode, m in (("full", None), ("reduced", mask)):
-        mm, deg = _deflection(design, theta_L, delta, w, m)
-        out[f"deflection_mm_{mode}"] = jnp.where(sol.feasible, mm, jnp.nan)
-        out[f"deflection_deg_{mode}"] = jnp.where(sol.feasible, deg, jnp.nan)
+        X, ok = _solve2(_K_b(design, load_geo, m), Jx.T @ w)
+        dx = Jx @ X
+        good = feas & ok
+        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(dx[:3]), jnp.nan)
+        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(dx[3:])), jnp.nan)
     out["n_taut_statics"] = jnp.sum(jax.lax.stop_gradient(mask)).astype(jnp.int32)
-    out["feasible"] = sol.feasible
+    out["feasible"] = feas
     return out
 
 
+#: Jitted :func:`compliance_pose` (``design`` values and the wrench are traced: no recompile).
+compliance_pose_jit = jax.jit(compliance_pose)
 #: ``over_grid`` lift of :func:`compliance_pose`, jitted: ``(design, theta_L (T,), delta (D,), wrench)``.
 compliance_grid_jit = jax.jit(over_grid(compliance_pose))
 
