@@ -54,7 +54,7 @@ def as_wrench(wrench) -> jnp.ndarray:
         raise ValueError(
             f"a wrench must have 3 (force) or 6 (force, moment) components, got shape {w.shape}"
         )
-    if not isinstance(w, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(w))):
+    if not isinstance(w, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(w))):
         raise ValueError(f"a wrench must be finite, got {np.asarray(w).tolist()}")
     return jnp.concatenate([w, jnp.zeros(6 - w.shape[0], w.dtype)])
 
@@ -267,10 +267,10 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     """
     w = as_wrench(wrench)
     b = _b_of(design, theta_L, delta)
-    A, rhs = equilibrium_b(design, b, w)
-    sol = min_norm_tensions(A, rhs, design.preload)
-    mask = taut_mask(design, sol.tau)
     Jx, load_geo = _load_terms_b(design, b, w)
+    rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
+    sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
+    mask = taut_mask(design, sol.tau)
     feas = sol.feasible
     out = {"tensions": jnp.where(feas, sol.tau, jnp.nan)}
     for mode, m in (("full", None), ("reduced", mask)):
