@@ -123,9 +123,10 @@ def identify(initial=None, maxiter: int = 50):
         starts = [initial]
     best = None
     for start in starts:
-        init = np.log(np.asarray(start, dtype=float))
-        if init.shape != (3,) or not np.all(np.isfinite(init)):
-            raise ValueError(f"initial (L, r, EI) must be three positive numbers, got {start}")
+        start = np.asarray(start, dtype=float)
+        if start.shape != (3,) or not np.all(np.isfinite(start)) or np.any(start <= 0):
+            raise ValueError(f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}")
+        init = np.log(start)
         p, its = levenberg_marquardt(_res_fn, _jac_fn, init, target, maxiter=maxiter)
         r = np.asarray(_res_fn(p, target))
         if np.all(np.isfinite(r)) and (best is None or r @ r < best[2]):
