@@ -40,7 +40,8 @@ def fig13(grids, path: Path):
             for n in (3, 4):
                 _band(ax, grids[(n, 75.0, pre)], f"deflection_{q}_{mode}", COLORS[n], f"{n} wires")
             ax.set_title(f"({letter}) {name}, preload {pre:g} N", fontsize=10)
-            ax.set_xlabel(r"bending direction $\delta$ (deg)")
+            if i == 1:
+                ax.set_xlabel(r"bending direction $\delta$ (deg)")
             if j == 0:
                 ax.set_ylabel(("position" if q == "mm" else "angular") + f" deflection ({unit})")
             ax.set_xticks(np.arange(0, 361, 60))
@@ -71,7 +72,8 @@ def fig14(grids, path: Path):
         kind = "position" if q == "mm" else "angular"
         ax.set_title(f"({letter}) {name}, {kind} deflection", fontsize=10)
         ax.set_ylabel(f"{kind} deflection ({q}), mean over " + r"$\theta_L$")
-        ax.set_xlabel(r"bending direction $\delta$ (deg)")
+        if letter in "cd":
+            ax.set_xlabel(r"bending direction $\delta$ (deg)")
         ax.set_xticks(np.arange(0, 361, 60))
         ax.set_ylim(bottom=0)
         ax.grid(alpha=0.3)
