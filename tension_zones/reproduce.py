@@ -51,9 +51,16 @@ def _kinematics(out: Path, summary: dict, quiet: bool) -> list[Path]:
     return reproduce_kinematics(out, summary, quiet)
 
 
+def _compliance(out: Path, summary: dict, quiet: bool) -> list[Path]:
+    from .figures_compliance import compliance_step
+
+    return compliance_step(out, summary, quiet)
+
+
 STEPS = [
     ("tension maps (Figs. 5, 7)", _tension_maps),
     ("kinematic conditioning and pose uncertainty (Sec. 6.1, Figs. 9-12)", _kinematics),
+    ("compliance (Sec. 6.2: identification, Figs. 13-14, Tables 1-2)", _compliance),
 ]
 
 

@@ -25,3 +25,15 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
     assert summary["tension_maps"]["one_taut_wire_fraction"]["3"] > 0.45
     assert summary["tension_maps"]["one_taut_wire_fraction"]["4"] < 0.02
     assert (tmp_path / "fig5_tension_map_3w.png").stat().st_size > 10_000
+    # Sec. 6.2: identified segment, Tables 1-2 within 10 % on average, three-wire ratio >= 2.5
+    from tension_zones.compliance_fit import PAPER_TABLE
+
+    comp = summary["compliance"]
+    ident = comp["identified"]
+    assert 10 <= ident["length_mm"] <= 40 and 1 <= ident["pitch_radius_mm"] <= 3
+    assert 10 <= ident["backbone_EI_Nmm2"] <= 5000
+    errs = [abs(comp["table"][str(n)][str(k)][i] / PAPER_TABLE[n][k][i] - 1)
+            for n in (3, 4) for k in (55, 75, 105) for i in (0, 2)]
+    assert len(errs) == 12 and sum(errs) / 12 <= 0.10
+    assert comp["reduced_over_traditional_position_mean"]["3"] >= 2.5
+    assert (tmp_path / "fig13_compliance.png").stat().st_size > 10_000

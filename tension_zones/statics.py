@@ -1,0 +1,310 @@
+"""Tension-only statics and compliance of one segment (MODEL.md Sec. 4; paper Sec. 5 and 6.2).
+
+Single-pose, pure functions, lifted to grids with :func:`~tension_zones.kinematics.over_grid`.
+Frames and units: the tip wrench ``w = [f; m]`` (N, N mm) and the twist-like deflection
+``dx = [dp; dtheta]`` (mm, rad) are in the base frame {B}; tensions in N; stiffness in
+N mm / rad^2 (configuration space).
+
+Equilibrium (paper Eq. 23): ``J_xpsi^T w - grad U - J_qpsi^T tau = 0`` with pull-only wires
+``tau >= f_min``. The computation runs in the bending vector ``b = (u, v)`` (MODEL.md Sec. 5), where
+``J_qb = -r [cos alpha_k, sin alpha_k]`` is constant and nothing is singular at the straight pose.
+``psi -> b`` is a diffeomorphism away from the straight pose, so the ``b``-form equilibrium
+``J_qb^T tau = J_xb^T w - EI b / L`` is the psi-form multiplied by an invertible ``(d psi/d b)^T``,
+and at an equilibrium the stiffness transforms as a tensor (``K_b = P^T K_psi P``,
+``P = d psi / d b``): both give the same task-space compliance (tested).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._numerics import eps_of, pinv_tall2, straight_through
+from .design import Design
+from .kinematics import J_qb, J_qpsi, J_xb, J_xpsi, over_grid, psi_to_b
+
+#: A wire is taut when ``tau_k > TAUT_REL_TOL * max_j tau_j`` (MODEL.md Sec. 4, ``f_min = 0``).
+TAUT_REL_TOL = 1e-6
+#: Relative KKT violation up to which a tension candidate is accepted (else: infeasible pose).
+KKT_TOL = 1e-9
+#: Temperature of the sigmoid surrogate behind the taut mask's straight-through gradient, on the
+#: normalised tension ``tau_k / max_j tau_j``.
+STATICS_TEMPERATURE = 0.05
+
+#: The paper's Sec. 6.2 sweep: theta_L = 89, 84, ..., 45 deg; delta = 0, 15, ..., 360 deg.
+PAPER_THETA_L_DEG = np.linspace(89.0, 45.0, 10)
+PAPER_DELTA_DEG = np.arange(0.0, 360.0 + 1e-9, 15.0)
+#: The paper's tip wrench: 5 N along x_b (a force fixed in the base frame).
+PAPER_WRENCH = (5.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+MODES = ("full", "reduced")
+
+
+def as_wrench(wrench) -> jnp.ndarray:
+    """A tip wrench ``[fx, fy, fz(, mx, my, mz)]`` (N, N mm) as a (6,) array; 3 values = a force.
+
+    Raises ``ValueError`` for any other shape or for non-finite values (concrete input only).
+    """
+    w = jnp.asarray(wrench, dtype=jnp.result_type(float))
+    if w.shape not in ((3,), (6,)):
+        raise ValueError(
+            f"a wrench must have 3 (force) or 6 (force, moment) components, got shape {w.shape}"
+        )
+    if not isinstance(w, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(w))):
+        raise ValueError(f"a wrench must be finite, got {np.asarray(w).tolist()}")
+    return jnp.concatenate([w, jnp.zeros(6 - w.shape[0], w.dtype)])
+
+
+# --------------------------------------------------------------------------------------------
+# Tension distribution: min ||tau||^2  s.t.  A tau = rhs, tau >= f_min   (A: 2 x n)
+# --------------------------------------------------------------------------------------------
+class TensionSolution(NamedTuple):
+    """Solution of the tension QP at one pose.
+
+    tau: (n,) tensions (N); lam: (2,) multipliers of the equality, with ``tau = max(f_min, A^T lam)``;
+    feasible: bool, the wires can hold the pose by pulling; kkt_residual: relative KKT violation.
+    """
+
+    tau: jax.Array
+    lam: jax.Array
+    feasible: jax.Array
+    kkt_residual: jax.Array
+
+
+def _free_sets(n: int) -> np.ndarray:
+    """All ``2^n`` candidate free sets (wires strictly above the bound) as 0/1 rows, (2^n, n)."""
+    return np.array(list(itertools.product((0.0, 1.0), repeat=n)))
+
+
+def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
+    """Exact solution of ``min ||tau||^2 s.t. A tau = rhs, tau >= f_min`` for ``A`` of shape (2, n).
+
+    Closed-form active set: the KKT conditions are ``tau = max(f_min, A^T lam)``, ``A tau = rhs``.
+    For every free set ``S`` (a static enumeration of the ``2^n`` subsets) the free tensions are the
+    minimum-norm solution of ``A_S tau_S = rhs - f_min A 1_{not S}`` and ``lam = pinv(A_S A_S^T)(...)``;
+    the candidate with the smallest KKT violation is returned (the QP is strictly convex, so the
+    KKT point is unique in ``tau``). Differentiable: the selected closed form carries the gradient.
+    ``feasible`` is False (and the pose must be flagged) when no candidate meets the KKT
+    conditions to ``KKT_TOL`` relative, i.e. the wires cannot hold the pose without pushing.
+    """
+    A = jnp.asarray(A)
+    n = A.shape[1]
+    dt = jnp.result_type(A, rhs, f_min, float)
+    A, rhs, f_min = A.astype(dt), jnp.asarray(rhs, dt), jnp.asarray(f_min, dt)
+    S = jnp.asarray(_free_sets(n), dt)  # (m, n)
+
+    def candidate(m):
+        J = A.T * m[:, None]  # (n, 2): rows of the free wires
+        r = rhs - f_min * (A @ (1.0 - m))
+        P = pinv_tall2(J)  # (2, n) = pinv(A_S)^T
+        lam = P @ (P.T @ r)  # pinv(A_S A_S^T) r
+        tau = f_min * (1.0 - m) + P.T @ r
+        return tau, lam
+
+    taus, lams = jax.vmap(candidate)(S)  # (m, n), (m, 2)
+    viol = jax.vmap(lambda t, l: _kkt_violation(A, rhs, f_min, t, l))(taus, lams)
+    viol = jax.lax.stop_gradient(viol)
+    i = jnp.argmin(viol)
+    tau, lam = taus[i], lams[i]
+    res = kkt_residual(A, rhs, f_min, tau, lam)
+    return TensionSolution(tau, lam, res <= KKT_TOL, res)
+
+
+def _kkt_scale(A, rhs, f_min, tau):
+    return (
+        jnp.linalg.norm(rhs)
+        + jnp.linalg.norm(A) * jnp.maximum(jnp.max(jnp.abs(tau)), f_min)
+        + jnp.finfo(A.dtype).tiny
+    )
+
+
+def kkt_residual(A, rhs, f_min, tau, lam):
+    """Relative KKT violation of ``(tau, lam)``: ``|A tau - rhs|`` and ``|tau - max(f_min, A^T lam)|``.
+
+    Both are zero exactly at the optimum (stationarity, bounds, dual feasibility and
+    complementarity are all in ``tau = max(f_min, A^T lam)``); scaled by ``|rhs| + |A| max tau``.
+    """
+    primal = jnp.linalg.norm(A @ tau - rhs)
+    station = jnp.max(jnp.abs(tau - jnp.maximum(f_min, A.T @ lam))) * jnp.linalg.norm(A)
+    return (primal + station) / _kkt_scale(A, rhs, f_min, tau)
+
+
+def _kkt_violation(A, rhs, f_min, tau, lam):
+    return kkt_residual(A, rhs, f_min, tau, lam)
+
+
+def equilibrium_b(design: Design, b, wrench):
+    """The equilibrium ``A tau = rhs`` in bending-vector coordinates at one pose.
+
+    ``A = J_qb^T`` (2, n), ``rhs = J_xb^T w - grad_b U`` (2,), ``U = EI |b|^2 / (2L)`` (MODEL.md Sec. 4-5).
+    """
+    w = as_wrench(wrench)
+    A = J_qb(design, b).T
+    rhs = J_xb(design, b).T @ w - design.backbone_EI * b / design.length
+    return A, rhs
+
+
+def tensions(design: Design, theta_L, delta, wrench) -> TensionSolution:
+    """Minimum-norm pull-only tensions holding the pose ``(theta_L, delta)`` (rad) under ``wrench``.
+
+    ``tau >= design.preload`` (N). See :func:`min_norm_tensions`.
+    """
+    A, rhs = equilibrium_b(design, psi_to_b(theta_L, delta), wrench)
+    return min_norm_tensions(A, rhs, design.preload)
+
+
+def taut_mask(design: Design, tau):
+    """The statics taut set, (n,) 0/1 with a straight-through gradient (MODEL.md Sec. 4).
+
+    Without preload: ``tau_k > 1e-6 max_j tau_j``; with a preload every wire is taut. Gradient: that of
+    ``sigmoid((tau_k / max tau - 1e-6) / STATICS_TEMPERATURE)`` (zero with a preload).
+    """
+    tmax = jnp.max(tau)
+    pos = tmax > 0
+    x = jnp.where(pos, tau / jnp.where(pos, tmax, 1.0), 0.0) - TAUT_REL_TOL
+    preloaded = design.preload > 0
+    hard = jnp.where(preloaded, True, x > 0)
+    soft = jnp.where(preloaded, jnp.ones_like(x), jax.nn.sigmoid(x / STATICS_TEMPERATURE))
+    return straight_through(hard, soft)
+
+
+# --------------------------------------------------------------------------------------------
+# Stiffness and compliance
+# --------------------------------------------------------------------------------------------
+def stiffness_psi(design: Design, theta_L, delta, wrench, tau, mask=None):
+    """Configuration stiffness ``K_psi`` (2, 2), N mm/rad^2, with all four terms (paper Eqs. 25-29).
+
+    ``K_psi = hess U + d(J_qpsi^T tau)/dpsi |_tau - d(J_xpsi^T w)/dpsi |_w + k_w J~^T J~``;
+    ``J~`` = the rows of ``J_qpsi`` of the wires with ``mask = 1`` (``None``: all, traditional).
+    Symmetric when the wrench has no moment (every term is then a Hessian). Singular at the
+    straight pose (``delta`` is not defined there): use :func:`stiffness_b` there.
+    """
+    w = as_wrench(wrench)
+    psi = jnp.stack([jnp.asarray(theta_L), jnp.asarray(delta)]).astype(design.length.dtype)
+    EI, L = design.backbone_EI, design.length
+    hess_U = jnp.array([[EI / L, 0.0], [0.0, 0.0]], dtype=psi.dtype)
+    wire_geo = jax.jacfwd(lambda p: J_qpsi(design, p[0], p[1]).T @ tau)(psi)
+    load_geo = jax.jacfwd(lambda p: J_xpsi(design, p[0], p[1]).T @ w)(psi)
+    Jq = J_qpsi(design, psi[0], psi[1])
+    if mask is not None:
+        Jq = Jq * mask[:, None]
+    return hess_U + wire_geo - load_geo + design.wire_stiffness * Jq.T @ Jq
+
+
+def _load_terms_b(design: Design, b, w):
+    """``(J_xb (6, 2), d(J_xb^T w)/db (2, 2))`` from one forward-mode pass."""
+    Jx_T_w = lambda bb: (J_xb(design, bb).T @ w, J_xb(design, bb))  # noqa: E731
+    load_geo, Jx = jax.jacfwd(Jx_T_w, has_aux=True)(b)
+    return Jx, load_geo
+
+
+def _K_b(design: Design, load_geo, mask):
+    Jq = J_qb(design)
+    if mask is not None:
+        Jq = Jq * mask[:, None]
+    EI, L = design.backbone_EI, design.length
+    return EI / L * jnp.eye(2, dtype=load_geo.dtype) - load_geo + design.wire_stiffness * Jq.T @ Jq
+
+
+def stiffness_b(design: Design, b, wrench, mask=None):
+    """Stiffness in bending-vector coordinates ``K_b`` (2, 2), N mm/rad^2; finite everywhere.
+
+    The four terms of :func:`stiffness_psi` in ``b``: ``hess U = EI/L I``; the wire term vanishes
+    (wire lengths are linear in ``b``); ``-d(J_xb^T w)/db``; ``k_w J~_qb^T J~_qb``.
+    """
+    return _K_b(design, _load_terms_b(design, b, as_wrench(wrench))[1], mask)
+
+
+def _solve2(K, B):
+    """``K^{-1} B`` for a 2x2 ``K``, and whether ``K`` is positive definite (det > 0, trace > 0).
+
+    Guarded (double ``where``): a singular or indefinite ``K`` gives zeros and ``ok = False``.
+    """
+    det = K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0]
+    tr = K[0, 0] + K[1, 1]
+    ok = (det > 1e3 * eps_of(K) * jnp.sum(K * K)) & (tr > 0)
+    adj = jnp.array([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]])
+    inv = jnp.where(ok, adj / jnp.where(ok, det, 1.0), 0.0)
+    return inv @ B, ok
+
+
+def _norm(x):
+    """Euclidean norm with a zero (not NaN) gradient at ``x = 0`` (double ``where``)."""
+    s = jnp.sum(x * x)
+    nz = s > 0
+    return jnp.where(nz, jnp.sqrt(jnp.where(nz, s, 1.0)), 0.0)
+
+
+def _b_of(design, theta_L, delta):
+    return psi_to_b(*(jnp.asarray(x, design.length.dtype) for x in (theta_L, delta)))
+
+
+def compliance(design: Design, theta_L, delta, wrench, mask=None):
+    """Task-space compliance ``C_x = J_xpsi K_psi^{-1} J_xpsi^T`` (6, 6) at one pose, and ``ok``.
+
+    Evaluated as ``J_xb K_b^{-1} J_xb^T`` (equal at an equilibrium, finite at the straight pose).
+    ``ok`` is False where ``K`` is not positive definite (the compliance is then zeros: flag it).
+    ``mask`` (n,) 0/1 selects the wires of ``J~`` (``None``: all wires, traditional).
+    """
+    Jx, load_geo = _load_terms_b(design, _b_of(design, theta_L, delta), as_wrench(wrench))
+    X, ok = _solve2(_K_b(design, load_geo, mask), Jx.T)
+    return Jx @ X, ok
+
+
+def compliance_pose(design: Design, theta_L, delta, wrench):
+    """Per-pose tension-only statics and compliance (one pose; ``over_grid`` lifts it to a grid).
+
+    Args: ``theta_L``, ``delta`` (rad); ``wrench`` (3,) or (6,), base frame (N, N mm).
+    Returns a dict: ``deflection_mm_full``, ``deflection_mm_reduced`` (``|dx[:3]|``, mm),
+    ``deflection_deg_full``, ``deflection_deg_reduced`` (``|dx[3:]|``, deg), ``dx = C_x w``;
+    ``tensions`` (n,) N; ``n_taut_statics`` (int); ``feasible`` (bool). "reduced" uses the
+    statics taut set, "full" all wires. Where the pose is infeasible (the wires would have to
+    push) or a stiffness is not positive definite, the deflections and tensions are NaN.
+    """
+    w = as_wrench(wrench)
+    b = _b_of(design, theta_L, delta)
+    Jx, load_geo = _load_terms_b(design, b, w)
+    rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
+    sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
+    mask = taut_mask(design, sol.tau)
+    feas = sol.feasible
+    out = {"tensions": jnp.where(feas, sol.tau, jnp.nan)}
+    for mode, m in (("full", None), ("reduced", mask)):
+        X, ok = _solve2(_K_b(design, load_geo, m), Jx.T @ w)
+        dx = Jx @ X
+        good = feas & ok
+        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(dx[:3]), jnp.nan)
+        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(dx[3:])), jnp.nan)
+    out["n_taut_statics"] = jnp.sum(jax.lax.stop_gradient(mask)).astype(jnp.int32)
+    out["feasible"] = feas
+    return out
+
+
+#: Jitted :func:`compliance_pose` (``design`` values and the wrench are traced: no recompile).
+compliance_pose_jit = jax.jit(compliance_pose)
+#: ``over_grid`` lift of :func:`compliance_pose`, jitted: ``(design, theta_L (T,), delta (D,), wrench)``.
+compliance_grid_jit = jax.jit(over_grid(compliance_pose))
+
+
+def compliance_grid(design: Design, wrench=PAPER_WRENCH, theta_L_deg=None, delta_deg=None):
+    """:func:`compliance_pose` over a grid; NumPy edge. Degrees in, dict of NumPy arrays out.
+
+    Defaults: the paper's Sec. 6.2 grid (``theta_L`` = linspace(89, 45, 10) deg, ``delta`` = 0, 15,
+    ..., 360 deg) and wrench ``[5 N, 0, 0, 0, 0, 0]``. Arrays have shape (n_theta, n_delta), and
+    ``tensions`` (n_theta, n_delta, n). Also returns ``theta_L_deg`` and ``delta_deg``.
+    """
+    th = np.asarray(PAPER_THETA_L_DEG if theta_L_deg is None else theta_L_deg, dtype=float)
+    de = np.asarray(PAPER_DELTA_DEG if delta_deg is None else delta_deg, dtype=float)
+    for name, a in (("theta_L_deg", th), ("delta_deg", de)):
+        if a.ndim != 1 or a.size == 0 or not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} must be a non-empty 1-D array of finite angles, got {a!r}")
+    if np.any(th > 90.0) or np.any(th <= -90.0):
+        raise ValueError(f"theta_L_deg must lie in (-90, 90] deg, got {th.tolist()}")
+    out = compliance_grid_jit(design, jnp.radians(th), jnp.radians(de), as_wrench(wrench))
+    res = {k: np.asarray(v) for k, v in out.items()}
+    res["theta_L_deg"], res["delta_deg"] = th, de
+    return res

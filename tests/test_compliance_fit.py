@@ -1,0 +1,39 @@
+"""The identification machinery of paper Sec. 6.2 (the full fit runs in test_reproduce)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from tension_zones import compliance_fit as cf
+
+
+def test_paper_means_order():
+    m = cf.paper_means()
+    assert m.shape == (12,) and len(cf.FIT_KEYS) == 12
+    assert m[cf.FIT_KEYS.index((3, 75, "mm"))] == 3.052
+    assert m[cf.FIT_KEYS.index((4, 105, "deg"))] == 8.06
+
+
+def test_initial_guess_is_a_plausible_wrist():
+    L, r, EI = cf.initial_guess()
+    assert 10 < L < 40 and 1 < r < 3 and EI > 0
+
+
+def test_levenberg_marquardt_rejects_non_finite_steps():
+    """Exponential fit whose unconstrained path crosses a region where the residuals are NaN."""
+    t = jnp.linspace(0.0, 1.0, 20)
+    y = 2.0 * jnp.exp(-1.5 * t)
+
+    def res(x):
+        r = x[0] * jnp.exp(-x[1] * t) - y
+        return jnp.where(x[0] > 1.2, r, jnp.nan)  # NaN "unstable" region below 1.2
+
+    x, n = cf.levenberg_marquardt(jax.jit(res), jax.jit(jax.jacfwd(res)), jnp.asarray([5.0, 0.1]))
+    np.testing.assert_allclose(np.asarray(x), [2.0, 1.5], rtol=1e-8)
+    assert n > 0
+
+
+def test_identify_rejects_bad_start():
+    with pytest.raises(ValueError, match="positive"):
+        cf.identify(initial=(15.0, -1.0, 80.0))
