@@ -21,6 +21,8 @@ from .kinematics import (
     wire_lengths,
     wire_lengths_b,
 )
+from .optimise import evaluate_design, optimize, spread
+from .scenario import Scenario, load_scenario, parse_scenario
 from .metrics import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
 from .sweep import grid_deg, sweep_grid, sweep_poses
 from .statics import (
@@ -74,6 +76,12 @@ __all__ = [
     "b_to_psi",
     "grid_deg",
     "compliance",
+    "evaluate_design",
+    "load_scenario",
+    "optimize",
+    "parse_scenario",
+    "Scenario",
+    "spread",
     "compliance_grid",
     "compliance_pose",
     "compliance_pose_jit",

@@ -118,22 +118,68 @@ def _positive(name: str, value: float) -> float:
     return value
 
 
+def _load_arg(text: str) -> np.ndarray:
+    try:
+        vals = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise CLIError(f"--load must be FX,FY,FZ (or six wrench components) in N, got {text!r}") from None
+    if len(vals) not in (3, 6) or not np.all(np.isfinite(vals)):
+        raise CLIError(f"--load must be 3 finite forces FX,FY,FZ (N) or 6 wrench components, got {text!r}")
+    return np.asarray(vals)
+
+
+def _with_compliance(args):
+    """Kinematic measures plus the tension-only statics (issue 4) in one per-pose function."""
+    from .metrics import pose_metrics
+    from .statics import as_wrench, compliance_pose
+
+    wrench = as_wrench(_load_arg(args.load))
+
+    def fn(design, theta_L, delta, dq, w):
+        return {**pose_metrics(design, theta_L, delta, dq), **compliance_pose(design, theta_L, delta, w)}
+
+    return fn, (args.dq, wrench)
+
+
 def cmd_sweep(args) -> None:
+    from .statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
     from .sweep import grid_deg, sweep_grid
 
     out = _out_path(args.out, ".npz")
+    if args.compliance:
+        missing = [f for f in ("wire_stiffness", "backbone_EI", "load") if getattr(args, f) is None]
+        if missing:
+            raise CLIError("--compliance needs " + ", ".join("--" + m.replace("_", "-") for m in missing))
+    elif any(getattr(args, f) is not None for f in ("wire_stiffness", "backbone_EI", "load", "preload")):
+        raise CLIError("--wire-stiffness, --backbone-EI, --load and --preload go with --compliance")
     design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
+    if args.compliance:
+        try:
+            design = design.replace(wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI,
+                                    preload=args.preload or 0.0)
+        except ValueError as e:
+            raise CLIError(str(e)) from None
     for name in ("theta_step", "delta_step", "dq"):
-        _positive("--" + name.replace("_", "-"), getattr(args, name))
-    theta_deg = grid_deg(85.0, args.theta_step)  # paper grid: 0..85 deg, 0..360 deg, ends included
-    delta_deg = grid_deg(360.0, args.delta_step)
-    fn, extra = SWEEP_MEASURES[args.measure](args)
+        if getattr(args, name) is not None:
+            _positive("--" + name.replace("_", "-"), getattr(args, name))
+    if args.compliance and args.theta_step is None:
+        theta_deg = np.asarray(PAPER_THETA_L_DEG)  # the paper's Sec. 6.2 grid
+    else:
+        theta_deg = grid_deg(85.0, args.theta_step or 5.0)  # Sec. 6.1: 0..85 deg, ends included
+    if args.compliance and args.delta_step is None:
+        delta_deg = np.asarray(PAPER_DELTA_DEG)
+    else:
+        delta_deg = grid_deg(360.0, args.delta_step or 2.5)
+    fn, extra = _with_compliance(args) if args.compliance else SWEEP_MEASURES[args.measure](args)
     res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
-                     quiet=args.quiet, desc=f"sweep {args.measure}")
+                     quiet=args.quiet, desc="sweep" + (" + compliance" if args.compliance else ""))
     th, de = np.meshgrid(theta_deg, delta_deg, indexing="ij")
     np.savez(out, theta_L_deg=th, delta_deg=de, **res)
     if not args.quiet:
         print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
+        if args.compliance and not np.all(res["feasible"]):
+            print(f"note: {int(np.sum(~res['feasible']))} poses cannot be held without pushing "
+                  "(feasible = False, deflections NaN there)")
 
 
 def _add_sweep_parser(sub) -> None:
@@ -142,11 +188,21 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--length", type=float, required=True, help="segment length L (mm)")
     s.add_argument("--pitch-radius", type=float, required=True, help="wire pitch radius r (mm)")
     s.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
-    s.add_argument("--theta-step", type=float, default=5.0, help="theta_L step (deg), 0..85 (default 5)")
-    s.add_argument("--delta-step", type=float, default=2.5, help="delta step (deg), 0..360 (default 2.5)")
+    s.add_argument("--theta-step", type=float, default=None,
+                   help="theta_L step (deg), 0..85 (default 5; with --compliance the paper's "
+                        "Sec. 6.2 grid linspace(89, 45, 10))")
+    s.add_argument("--delta-step", type=float, default=None,
+                   help="delta step (deg), 0..360 (default 2.5; with --compliance 15)")
     s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
     s.add_argument("--measure", choices=sorted(SWEEP_MEASURES), default="kinematics",
                    help="which per-pose measures to sweep (default: kinematics)")
+    c = s.add_argument_group("compliance (issue 4: tension-only statics)")
+    c.add_argument("--compliance", action="store_true",
+                   help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible")
+    c.add_argument("--wire-stiffness", type=float, help="k_w (N/mm)")
+    c.add_argument("--backbone-EI", type=float, help="backbone bending stiffness EI (N mm^2)")
+    c.add_argument("--load", help="tip force FX,FY,FZ (N, base frame), or six wrench components")
+    c.add_argument("--preload", type=float, help="wire preload f_min (N, default 0)")
     s.add_argument("--out", required=True, help="output .npz file")
     s.add_argument("--quiet", action="store_true", help="no progress bar or messages")
     s.set_defaults(func=cmd_sweep)
