@@ -111,6 +111,7 @@ def zonogon_vertices(G):
     parallel = jnp.abs(C) <= tol * nrm[:, None] * nrm[None, :]  # incl. k = j
     side = jnp.where(parallel, 0.0, jnp.sign(C))
     edge = jnp.where(parallel, jnp.sign(D), 0.0)  # the edge along g_j, signed consistently
+    edge = jnp.where(jnp.eye(G.shape[1], dtype=bool), 1.0, edge)  # g_j itself, even if |g_j|^2 flushes
     coef = jnp.concatenate([side + edge, side - edge], axis=0)  # (2n, n)
     return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
 
