@@ -27,39 +27,61 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..design import Design
-from ..kinematics import tip_pose_b, wire_lengths_b
+from .._numerics import sinc_sq, versinc_sq
 
 #: Damped-Newton iterations: a 2-D piecewise-quadratic problem converges in a handful; the rest is margin.
 NEWTON_ITERS = 16
 #: Step sizes tried by the line search (all evaluated at once: no value-dependent branching).
-_STEPS = 2.0 ** -np.arange(12)
+_STEPS = 2.0 ** -np.arange(10)
 
 
-def _design_of(phys) -> Design:
-    """A Design pytree carrying traced geometry (only length, radius and angles are read)."""
-    n = phys["wire_angles"].shape[0]
-    leaves = (phys["length"], phys["pitch_radius"], phys["wire_angles"],
-              jnp.mean(phys["wire_stiffness"]), phys["EI"], jnp.mean(phys["preload"]))
-    return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(Design(n, 1.0, 1.0)), leaves)
+def _position(b, L):
+    """Tip position of MODEL.md Sec. 5 (the same formula as ``tip_pose_b``, without the rotation)."""
+    phi2 = b[0] * b[0] + b[1] * b[1]
+    k = L * versinc_sq(phi2)
+    return jnp.stack([k * b[0], k * b[1], L * sinc_sq(phi2)])
+
+
+class _Terms:
+    """The pieces of ``V`` for one sample, with gradient and generalised Hessian written out
+    (autodiff only for the small load term): a smaller program compiles much faster."""
+
+    def __init__(self, phys, q, f, tension):
+        a = phys["wire_angles"]
+        self.A = phys["pitch_radius"] * jnp.stack([jnp.cos(a), jnp.sin(a)], axis=1)  # (n, 2)
+        self.c = -q + phys["preload"] / phys["wire_stiffness"]  # s = c - A b
+        self.kt = tension * phys["wire_stiffness"]
+        self.ei = phys["EI"] / phys["length"]
+        self.L, self.f = phys["length"], f
+
+    def load(self, b):
+        return jnp.dot(self.f, _position(b, self.L))
+
+    def value(self, b):
+        s = self.c - self.A @ b
+        return 0.5 * self.ei * jnp.dot(b, b) + 0.5 * jnp.sum(self.kt * jnp.maximum(s, 0.0) ** 2) - self.load(b)
+
+    def grad(self, b):
+        s = self.c - self.A @ b
+        return self.ei * b - self.A.T @ (self.kt * jnp.maximum(s, 0.0)) - jax.grad(self.load)(b)
+
+    def hess(self, b):
+        taut = (self.c - self.A @ b > 0).astype(b.dtype)
+        H = self.ei * jnp.eye(2, dtype=b.dtype) + (self.A.T * (self.kt * taut)) @ self.A
+        return H - jax.hessian(self.load)(b)
 
 
 def energy(b, phys, q, f, tension):
     """``V(b)`` for one sample (N mm)."""
-    design = _design_of(phys)
-    k = phys["wire_stiffness"]
-    s = (wire_lengths_b(design, b) - phys["length"]) - q + phys["preload"] / k
-    wires = 0.5 * jnp.sum(tension * k * jnp.maximum(s, 0.0) ** 2)
-    p, _ = tip_pose_b(design, b)
-    return 0.5 * phys["EI"] * jnp.dot(b, b) / phys["length"] + wires - jnp.dot(f, p)
+    return _Terms(phys, q, f, tension).value(b)
 
 
-def _newton(V, b0, iters=NEWTON_ITERS):
+def _newton(t: _Terms, b0, iters=NEWTON_ITERS):
     """Damped Newton on V with the (generalised) Hessian made positive definite."""
-    grad, hess = jax.grad(V), jax.hessian(V)
     steps = jnp.asarray(_STEPS, b0.dtype)
 
     def step(b, _):
-        g, H = grad(b), hess(b)
+        g, H = t.grad(b), t.hess(b)
         H = 0.5 * (H + H.T)
         half_tr = 0.5 * (H[0, 0] + H[1, 1])
         det = H[0, 0] * H[1, 1] - H[0, 1] ** 2
@@ -68,12 +90,12 @@ def _newton(V, b0, iters=NEWTON_ITERS):
         floor = 1e-6 * jnp.maximum(jnp.abs(half_tr), 1.0)
         H = H + jnp.maximum(floor - lam_min, 0.0) * jnp.eye(2, dtype=H.dtype)
         d = -jnp.linalg.solve(H, g)
-        v0 = V(b)
-        vs = jax.vmap(lambda t: V(b + t * d))(steps)
+        v0 = t.value(b)
+        vs = jax.vmap(lambda s: t.value(b + s * d))(steps)
         # Armijo with a round-off allowance, so converged steps are not rejected by noise in V
         ok = vs <= v0 + 1e-4 * steps * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
-        t = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0)
-        return b + t * d, None
+        step_size = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0)
+        return b + step_size * d, None
 
     b, _ = jax.lax.scan(step, b0, None, length=iters)
     return b
@@ -81,19 +103,23 @@ def _newton(V, b0, iters=NEWTON_ITERS):
 
 def equilibrium(phys, q, f, tension):
     """Equilibrium bending vector ``b*`` (2,) of one sample; implicitly differentiable."""
-    V = lambda b: energy(b, phys, q, f, tension)  # noqa: E731
     b0 = jnp.zeros(2, dtype=jnp.result_type(phys["length"], q, float))
+
+    def grad_V(b):
+        return _Terms(phys, q, f, tension).grad(b)
+
+    def solve(_, x0):
+        return _newton(_Terms(phys, q, f, tension), x0)
 
     def tangent_solve(g, y):
         return jnp.linalg.solve(jax.jacobian(g)(y), y)
 
-    return jax.lax.custom_root(jax.grad(V), b0, lambda F, x0: _newton(V, x0), tangent_solve)
+    return jax.lax.custom_root(grad_V, b0, solve, tangent_solve)
 
 
 def tip_position(phys, q, f, tension):
     """Tip position (3,) of one sample at equilibrium (mm)."""
-    b = equilibrium(phys, q, f, tension)
-    return tip_pose_b(_design_of(phys), b)[0]
+    return _position(equilibrium(phys, q, f, tension), phys["length"])
 
 
 def motion_direction(q):

@@ -57,13 +57,7 @@ def predict_theta(spec: Spec, theta, phys0, inputs):
     return pos
 
 
-@partial(jax.jit, static_argnums=0)
-def predict_jit(spec, theta, phys0, inputs):
-    return predict_theta(spec, theta, phys0, inputs)
-
-
-@partial(jax.jit, static_argnums=0)
-def residual_jacobian(spec, theta, phys0, inputs, y):
+def _residual_jacobian(spec, theta, phys0, inputs, y):
     """Residuals (N, 3) and their Jacobian (N, 3, P) with respect to every parameter (forward mode)."""
     fn = lambda th: predict_theta(spec, th, phys0, inputs) - y  # noqa: E731
     return fn(theta), jax.jacfwd(fn)(theta)
@@ -81,49 +75,55 @@ def huber_cost(r, w, c):
     return jnp.sum(w * rho)
 
 
-@partial(jax.jit, static_argnums=(0, 10))
-def lm_fit(spec, theta0, free, w, c, lo, hi, phys0, inputs, y, max_iter=40):
-    """Bounded Levenberg-Marquardt with IRLS (Huber) weights, over the free parameters only.
+@partial(jax.jit, static_argnums=0)
+def engine(spec, theta0, free, w, c, lo, hi, phys0, inputs, y, max_iter):
+    """Bounded Levenberg-Marquardt with IRLS (Huber) weights over the free parameters, then the
+    residuals and Jacobian at the result: the one compiled function of the loop (``max_iter = 0``
+    just evaluates, so predictions and score tests need no compilation of their own).
 
     Args:
         theta0: start (P,); free: 0/1 (P,); w: sample weights (N,) (0 = not in the fit);
         c: Huber threshold on the 3-D residual norm (mm), ``inf`` for least squares;
-        lo, hi: bounds (P,), enforced by projection.
-    Returns ``(theta, cost, iterations)``.
+        lo, hi: bounds (P,), enforced by projection; max_iter: iteration limit (traced).
+    Returns ``(theta, cost, iterations, residuals (N, 3), Jacobian (N, 3, P))``.
     """
     freeb = free > 0
     eye = jnp.eye(theta0.shape[0], dtype=theta0.dtype)
 
-    def cost_of(th):
-        r = predict_theta(spec, th, phys0, inputs) - y
-        return huber_cost(r, w, c)
-
-    def body(state):
-        th, lam, cost, it, _ = state
-        r, J = residual_jacobian(spec, th, phys0, inputs, y)
+    def propose(th, r, J, lam):
         sw = w * huber_weights(r, c)
         J = J * free
         A = jnp.einsum("nip,niq,n->pq", J, J, sw)
         g = jnp.einsum("nip,ni,n->p", J, r, sw)
         d = jnp.diag(A)
         d = jnp.maximum(d, 1e-12 * jnp.max(d) + 1e-300)
-        A = A + lam * jnp.diag(d)
-        A = jnp.where(freeb[:, None] & freeb[None, :], A, eye)
+        A = jnp.where(freeb[:, None] & freeb[None, :], A + lam * jnp.diag(d), eye)
         step = -jnp.linalg.solve(A, jnp.where(freeb, g, 0.0))
-        new = jnp.clip(th + jnp.where(freeb, step, 0.0), lo, hi)
-        new_cost = cost_of(new)
-        ok = new_cost < cost
-        rel = (cost - new_cost) / jnp.maximum(cost, 1e-300)
+        return jnp.clip(th + jnp.where(freeb, step, 0.0), lo, hi)
+
+    # One model evaluation per pass (a single copy of the model in the compiled program): evaluate
+    # the candidate, accept it if it lowers the cost (the first pass always does), propose the next.
+    def body(state):
+        th, r, J, cost, cand, lam, it, _ = state
+        r_c, J_c = _residual_jacobian(spec, cand, phys0, inputs, y)
+        cost_c = huber_cost(r_c, w, c)
+        ok = cost_c < cost
+        rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
         done = (ok & (rel < 1e-10)) | (lam > 1e12)
-        return (jnp.where(ok, new, th), jnp.where(ok, lam / 3.0, lam * 4.0),
-                jnp.where(ok, new_cost, cost), it + 1, done)
+        th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
+        cost = jnp.where(ok, cost_c, cost)
+        lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
+        return th, r, J, cost, propose(th, r, J, lam), lam, it + 1, done
 
     def cond(state):
-        return (state[3] < max_iter) & ~state[4]
+        return (state[6] <= max_iter) & ~state[7]
 
-    state = (theta0, jnp.asarray(1e-3, theta0.dtype), cost_of(theta0), 0, False)
-    th, _, cost, it, _ = jax.lax.while_loop(cond, body, state)
-    return th, cost, it
+    P = theta0.shape[0]
+    r0 = jnp.zeros_like(y)
+    state = (theta0, r0, jnp.zeros(y.shape + (P,), y.dtype), jnp.asarray(jnp.inf, y.dtype), theta0,
+             jnp.asarray(1e-3, y.dtype), 0, False)
+    th, r, J, cost, _, _, it, _ = jax.lax.while_loop(cond, body, state)
+    return th, cost, it, r, J
 
 
 class Problem:
@@ -155,23 +155,27 @@ class Problem:
             m[sl[name]] = 1.0
         return m
 
-    def predict(self, theta) -> np.ndarray:
-        return np.asarray(predict_jit(self.spec, jnp.asarray(theta), self.phys0, self.inputs))
-
-    def residuals(self, theta) -> np.ndarray:
-        return self.predict(theta) - np.asarray(self.y)
+    def _run(self, theta0, active, weights, huber_c, max_iter):
+        theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
+        out = engine(self.spec, jnp.asarray(theta0), jnp.asarray(self.mask(active)),
+                     jnp.asarray(weights, float), jnp.asarray(huber_c, float), jnp.asarray(self.lo),
+                     jnp.asarray(self.hi), self.phys0, self.inputs, self.y, jnp.asarray(max_iter))
+        return tuple(np.asarray(x) for x in out)
 
     def jacobian(self, theta):
-        r, J = residual_jacobian(self.spec, jnp.asarray(theta), self.phys0, self.inputs, self.y)
-        return np.asarray(r), np.asarray(J)
+        """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta``."""
+        _, _, _, r, J = self._run(theta, [], np.zeros(self.data.n_samples), np.inf, 0)
+        return r, J
+
+    def residuals(self, theta) -> np.ndarray:
+        return self.jacobian(theta)[0]
+
+    def predict(self, theta) -> np.ndarray:
+        return self.residuals(theta) + np.asarray(self.y)
 
     def fit(self, theta0, active, weights, huber_c=np.inf, max_iter=40) -> np.ndarray:
-        theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
-        th, _, _ = lm_fit(self.spec, jnp.asarray(theta0), jnp.asarray(self.mask(active)),
-                          jnp.asarray(weights, float), jnp.asarray(huber_c, float),
-                          jnp.asarray(self.lo), jnp.asarray(self.hi), self.phys0, self.inputs,
-                          self.y, max_iter)
-        return np.asarray(th)
+        """Fit the blocks named in ``active`` (the others stay where ``theta0`` has them)."""
+        return self._run(theta0, active, weights, huber_c, max_iter)[0]
 
     def describe(self, theta, names) -> dict:
         """``{block: {label: value}}`` in report units, for the named blocks."""
