@@ -118,11 +118,12 @@ def _embed(name: str, x: np.ndarray) -> np.ndarray:
     return (x - x.mean(axis=0)) / np.where(s > 0, s, 1.0)
 
 
-def _knn(X: np.ndarray, k: int) -> np.ndarray:
+def _knn(X: np.ndarray, k: int, rng) -> np.ndarray:
     d2 = np.sum((X[:, None, :] - X[None, :, :]) ** 2, axis=-1)
     np.fill_diagonal(d2, np.inf)
-    # ties broken by index so constant features do not pick arbitrary neighbours
-    return np.argsort(d2 + 1e-12 * np.arange(len(X))[None, :], axis=1, kind="stable")[:, :k]
+    # ties (e.g. all unloaded samples) broken at random, not by index: an index order would smuggle
+    # the acquisition order into another feature
+    return np.argsort(d2 + 1e-12 * rng.random(d2.shape), axis=1)[:, :k]
 
 
 def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: int = 1000,
@@ -146,7 +147,7 @@ def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: in
     perms = np.stack([rng.permutation(m) for _ in range(n_perm)])
     out = {}
     for name, x in feats.items():
-        nb = _knn(_embed(name, x), k)
+        nb = _knn(_embed(name, x), k, rng)
         loo = lambda rr: np.sum((rr - rr[nb].mean(axis=1)) ** 2)  # noqa: E731
         stat = loo(r)
         null = np.array([loo(r[p]) for p in perms])

@@ -108,9 +108,11 @@ def markdown(res: Result, report: dict) -> str:
                      + ", ".join(f"{c['name']} {c['score']:.1f}" for c in sc) + ".")
         lines.append("")
         for t in rd["tried"]:
+            verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
+                                                    else "not significant")
             lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
-                         f"the held-out sum of squares {t['sse_drop_sigma2']:.1f} sigma^2 (needed "
-                         f"{t['needed_sigma2']:.1f}) -> {'kept' if t['accepted'] else 'rejected'}")
+                         f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
+                         f"{t['needed']:.1f}) -> {verdict}")
         if not rd["tried"]:
             lines.append("- no candidate significant: the loop stops.")
         lines.append("")
