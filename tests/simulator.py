@@ -86,9 +86,9 @@ def trajectory(n_samples: int, rng, max_bend=0.75, step=0.045):
             bs.append(b + (target - b) * s / m)
             loads.append(np.zeros(3))
         b = target
-        for _ in range(rng.integers(2, 7)):  # dwell: repeats, some with a hung load
+        for _ in range(rng.integers(3, 9)):  # dwell: repeats, some with a hung load
             bs.append(b.copy())
-            loaded = rng.random() < 0.45
+            loaded = rng.random() < 0.35
             loads.append(rng.normal(0, 0.7, 3).clip(-1.5, 1.5) if loaded else np.zeros(3))
     return np.array(bs[:n_samples]), np.array(loads[:n_samples])
 

@@ -187,5 +187,5 @@ def score_test(r_h: np.ndarray, J_h: np.ndarray, active_cols: np.ndarray, cand_c
         return {"score": 0.0, "stat": 0.0, "dof": 0, "explained_mm2": 0.0}
     proj = U[:, :rank].T @ r
     stat = float(proj @ proj)
-    expl = float(np.sum((U[:, :rank] @ proj).reshape(-1, 3) ** 2 / sw**2) / len(r_h))
+    expl = float(np.sum(((U[:, :rank] @ proj).reshape(-1, 3) * np.asarray(sigma)) ** 2) / len(r_h))
     return {"score": chi2_z(stat, rank), "stat": stat, "dof": rank, "explained_mm2": expl}

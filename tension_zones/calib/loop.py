@@ -8,6 +8,8 @@
    exceed the chi-square quantile of the effect's parameter count at ``alpha``, and the held-out RMSE
    must fall by at least ``min_gain``. Of those, the one with the lowest held-out error is kept
    (effects overlap: a registration explains part of almost anything, the true effect all of it).
+   Then a backward step: an earlier effect whose removal no longer raises the held-out error
+   significantly (same test) was only standing in for the new one, and is removed.
 4. Repeat until no candidate helps; then test the final held-out residual for structure left.
 """
 
@@ -155,7 +157,8 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
         f"noise floor {noise['floor_mm']:.4f} mm")
     effects, candidates, rounds = [], [], []
     rnd = 0
-    while max_rounds is None or rnd < max_rounds:
+    max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
+    while rnd < max_rounds:
         rnd += 1
         remaining = [n for n in cand_names if n not in active]
         if not remaining:
@@ -205,7 +208,28 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
             t.pop("theta"), t.pop("err"), t.pop("score")
             t["accepted"] = accepted is not None and t["name"] == accepted["name"]
         accepted = None if accepted is None else accepted["name"]
-        rounds.append({"round": rnd, "z_critical": z_crit, "tried": tried, "accepted": accepted})
+        removed = []
+        if accepted is not None:
+            # backward step: an earlier effect that only stood in for the one just added goes
+            for e in [e for e in effects if e["name"] != accepted]:
+                th0 = theta.copy()
+                th0[sl[e["name"]]] = pb.null[sl[e["name"]]]
+                rest = [a for a in active if a != e["name"]]
+                th_wo = fit(th0, rest)
+                plain_wo, err_wo, _ = held_error(th_wo)
+                unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+                rise = (err_wo**2 - err**2) * int(held.sum()) / unit
+                need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
+                say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
+                if rise < need:
+                    theta, err, active = th_wo, err_wo, rest
+                    effects = [x for x in effects if x["name"] != e["name"]]
+                    removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
+                                    "needed": need})
+                    say(f"  removed {e['name']}")
+                    break
+        rounds.append({"round": rnd, "z_critical": z_crit, "tried": tried, "accepted": accepted,
+                       "removed": removed})
         if accepted is None:
             break
 

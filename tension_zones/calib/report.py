@@ -113,6 +113,10 @@ def markdown(res: Result, report: dict) -> str:
             lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
                          f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
                          f"{t['needed']:.1f}) -> {verdict}")
+        for t in rd.get("removed", []):
+            lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
+                         f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
+                         "effect and is removed")
         if not rd["tried"]:
             lines.append("- no candidate significant: the loop stops.")
         lines.append("")
