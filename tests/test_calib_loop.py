@@ -102,10 +102,20 @@ def test_glitches_robust_loss_keeps_the_fit(tmp_path):
 
 def test_cli_end_to_end(tmp_path, capsys):
     csv, dj = write_set(tmp_path, "reg", ALONE["registration"], 240, seed=4)
+    lines = csv.read_text().splitlines()
+    cells = lines[100].split(",")
+    cells[-4] = "nan"  # pz of data row 100
+    lines[100] = ",".join(cells)
+    csv.write_text("\n".join(lines) + "\n")
     out = tmp_path / "out"
-    assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet"]) == 0
-    assert "effects added: registration" in capsys.readouterr().out
+    assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet"]) == 2
+    assert "column 'pz', row 100" in capsys.readouterr().err
+    assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet",
+                 "--drop-bad"]) == 0
+    text = capsys.readouterr().out
+    assert "effects added: registration" in text and "dropped rows: 1" in text
     rep = json.loads((out / "report.json").read_text())
+    assert rep["dropped_rows"] == 1 and rep["dropped"][0]["row"] == 100 and rep["n_samples"] == 239
     for key in ("rmse_declared_mm", "rmse_before_mm", "rmse_after_mm", "effects", "candidates",
                 "noise_floor_mm", "unexplained_structure", "parameters"):
         assert key in rep

@@ -75,7 +75,7 @@ def _wire_columns(header: list[str]) -> list[str]:
     return qs
 
 
-def _bad_cells(name: str, col: str, values: np.ndarray, length: float | None):
+def _bad_cells(col: str, values: np.ndarray, length: float | None):
     """(row index, reason) of every bad cell of one column."""
     bad = []
     finite = np.isfinite(values)
@@ -144,7 +144,7 @@ def load_csv(path, n_wires: int | None = None, length: float | None = None,
     for c in need:
         if c == "sample":
             continue
-        for i, why in _bad_cells(path.name, c, cols[c], length):
+        for i, why in _bad_cells(c, cols[c], length):
             bad.setdefault(int(i), (c, why))
     rotn = np.linalg.norm(np.stack([cols[c] for c in ROT_COLS], 1), axis=1)
     for i in np.flatnonzero(np.isfinite(rotn) & (rotn > math.pi * (1 + 1e-6))):

@@ -56,11 +56,11 @@ class Result:
     unexplained_structure: bool
     robust: bool
     seconds: float
+    nominal: list = dataclasses.field(default_factory=list)
 
     def to_json(self) -> dict:
         """The ``report.json`` content (keys of issue 6, plus the evidence)."""
         pb = self.problem
-        nominal = [b.name for b in pb.spec.blocks if b.name not in {e.name for e in LIBRARY}]
         return {
             "data": pb.data.source,
             "n_samples": pb.data.n_samples,
@@ -75,7 +75,7 @@ class Result:
             "rmse_train_after_mm": self.rmse["train_after"],
             "noise_floor_mm": self.noise["floor_mm"],
             "noise": self.noise,
-            "nominal_parameters": nominal,
+            "nominal_parameters": list(self.nominal),
             "effects": self.effects,
             "candidates": self.candidates,
             "rounds": self.rounds,
@@ -255,7 +255,7 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
                   theta_before=theta_before, theta_after=theta, active=active, effects=effects,
                   candidates=candidates, rounds=rounds, structure=structure, rmse=rmse,
                   unexplained_structure=unexplained, robust=robust,
-                  seconds=time.perf_counter() - t0)
+                  seconds=time.perf_counter() - t0, nominal=nominal_names)
 
 
 #: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.

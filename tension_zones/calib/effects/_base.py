@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import dataclasses
 
-import jax.numpy as jnp
 import numpy as np
 
 
@@ -66,6 +65,3 @@ def replace(d: dict, **changes) -> dict:
     out.update(changes)
     return out
 
-
-def as_array(x):
-    return jnp.asarray(x)
