@@ -17,7 +17,7 @@ from tension_zones.cli import main
 
 ALONE = {
     "backlash": Truth(play=(0.2, 0.3, 0.15)),
-    "friction": Truth(friction=0.12),
+    "friction": Truth(friction=0.2),
     "wire_angle_offset": Truth(angle_offsets_deg=(4.0, -3.0, 5.0)),
     "wire_stiffness": Truth(stiffness_factors=(0.6, 1.0, 1.5)),
     "preload": Truth(d_preload=(3.0, -1.5, 0.0)),
@@ -50,6 +50,8 @@ def test_recovered_values(tmp_path):
     rep = run(tmp_path, "bl", ALONE["backlash"])
     play = list(rep["effects"][0]["params"].values())
     np.testing.assert_allclose(play, [0.2, 0.3, 0.15], atol=0.03)
+    std = np.array(list(rep["effects"][0]["params_std"].values()))
+    assert np.all(std > 0) and np.all(np.abs(np.subtract(play, [0.2, 0.3, 0.15])) < 5 * std + 1e-3)
     rep = run(tmp_path, "geo", ALONE["geometry"])
     p = rep["effects"][0]["params"]
     assert abs(p["length_mm"] - 20.4) < 0.1 and abs(p["pitch_radius_mm"] - 2.15) < 0.05

@@ -26,7 +26,7 @@ from .data import Dataset
 from .diagnose import chi2_quantile, features, noise_floor, score_test, structure_test
 from .effects import LIBRARY, NOMINAL
 from .forward import SegmentModel
-from .model import Problem
+from .model import Problem, parameter_std
 
 #: Structure left is claimed when a feature's permutation z-value (or the offset's) exceeds this.
 STRUCTURE_Z = 4.0
@@ -47,6 +47,7 @@ class Result:
     theta_declared: np.ndarray
     theta_before: np.ndarray
     theta_after: np.ndarray
+    std_after: np.ndarray
     active: list
     effects: list
     candidates: list
@@ -81,7 +82,8 @@ class Result:
             "rounds": self.rounds,
             "unexplained_structure": self.unexplained_structure,
             "structure": self.structure,
-            "parameters": final_parameters(pb, self.theta_after, self.active),
+            "parameters": {**final_parameters(pb, self.theta_after, self.active),
+                           "std": pb.describe_std(self.theta_after, self.active, self.std_after)},
             "seconds": self.seconds,
         }
 
@@ -233,10 +235,12 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
         if accepted is None:
             break
 
-    # effect parameters as finally fitted (later effects refit earlier ones)
+    # effect parameters as finally fitted (later effects refit earlier ones), with linearised deviations
+    r_after, J_after = pb.jacobian(theta)
+    std = parameter_std(J_after, r_after, pb.mask(active), w_train)
     for e in effects:
         e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
-    r_after = pb.residuals(theta)
+        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
     feats = features(data, pb.predict(theta_decl))
     held_feats = {k: v[held] for k, v in feats.items()}
     structure = structure_test(r_after[held], held_feats, sigma)
@@ -252,7 +256,7 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
     rmse = {"declared": _rmse(r_decl, held), "before": rmse_before, "after": plain_after,
             "train_after": _rmse(r_after, train)}
     return Result(problem=pb, train=train, held=held, noise=noise, theta_declared=theta_decl,
-                  theta_before=theta_before, theta_after=theta, active=active, effects=effects,
+                  theta_before=theta_before, theta_after=theta, std_after=std, active=active, effects=effects,
                   candidates=candidates, rounds=rounds, structure=structure, rmse=rmse,
                   unexplained_structure=unexplained, robust=robust,
                   seconds=time.perf_counter() - t0, nominal=nominal_names)

@@ -186,3 +186,37 @@ class Problem:
                 vals = b.report_values(np.asarray(theta)[sl[b.name]], self._phys_np)
                 out[b.name] = {k: float(v) for k, v in zip(b.labels(self._phys_np), np.ravel(vals))}
         return out
+
+    def describe_std(self, theta, names, std) -> dict:
+        """Standard deviations ``std`` (P,) of the parameters, in report units (each block's report
+        transform is elementwise, so its slope converts them)."""
+        out = {}
+        sl = self.spec.slices()
+        theta = np.asarray(theta, float)
+        for b in self.spec.blocks:
+            if b.name in names:
+                th, sd = theta[sl[b.name]], np.asarray(std)[sl[b.name]]
+                h = 1e-6 * np.maximum(np.abs(th), 1.0)
+                slope = (np.ravel(b.report_values(th + h, self._phys_np))
+                         - np.ravel(b.report_values(th - h, self._phys_np))) / (2 * h)
+                out[b.name] = {k: float(v) for k, v in zip(b.labels(self._phys_np), np.abs(slope) * sd)}
+        return out
+
+
+def parameter_std(J, r, free, weights) -> np.ndarray:
+    """Linearised standard deviations (P,) of the free parameters (0 for the others).
+
+    ``cov = s^2 (J' W J)^-1`` over the free columns, ``s^2`` the residual variance per axis with the
+    degrees of freedom of the fit; a pseudo-inverse so a pair that trades off shows large deviations
+    instead of failing.
+    """
+    cols = np.flatnonzero(np.asarray(free) > 0)
+    w = np.asarray(weights, float)
+    Jf = (J[:, :, cols] * np.sqrt(w)[:, None, None]).reshape(-1, len(cols))
+    rw = (r * np.sqrt(w)[:, None]).ravel()
+    dof = max(int(3 * np.count_nonzero(w)) - len(cols), 1)
+    s2 = float(rw @ rw) / dof
+    std = np.zeros(J.shape[-1])
+    std[cols] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Jf.T @ Jf)) * s2, 0.0))
+    return std
+

@@ -67,8 +67,9 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
     return paths
 
 
-def _fmt_params(params: dict) -> str:
-    return ", ".join(f"{k} = {v:.4g}" for k, v in params.items())
+def _fmt_params(params: dict, std: dict | None = None) -> str:
+    std = std or {}
+    return ", ".join(f"{k} = {v:.4g}" + (f" +- {std[k]:.2g}" if k in std else "") for k, v in params.items())
 
 
 def markdown(res: Result, report: dict) -> str:
@@ -94,7 +95,7 @@ def markdown(res: Result, report: dict) -> str:
     lines += ["## What was found", ""]
     if report["effects"]:
         for e in report["effects"]:
-            lines.append(f"- **{e['name']}**: {_fmt_params(e['params'])}")
+            lines.append(f"- **{e['name']}**: {_fmt_params(e['params'], e.get('params_std'))}")
     else:
         lines.append("- No effect of the library improved the held-out error significantly: none added.")
     lines += [f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}**.", ""]
@@ -130,7 +131,9 @@ def markdown(res: Result, report: dict) -> str:
     ex = report["structure"]["excess_over_noise"]
     lines += [f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
               f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
-    lines += ["## Final parameters", "", "```", json.dumps(report["parameters"], indent=1), "```", "",
+    lines += ["## Final parameters", "",
+              "`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
+              "in report units; `std`: linearised standard deviations from the training fit.", "", "```", json.dumps(report["parameters"], indent=1), "```", "",
               "## Plots", ""]
     for f in PLOTS.values():
         lines.append(f"![{f}]({f})")
