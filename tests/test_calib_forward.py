@@ -8,10 +8,10 @@ from hypothesis import strategies as st
 from simulator import _equilibrium, position
 
 import tension_zones as tz
-from tension_zones.calib import SegmentModel, equilibrium, motion_direction, tip_position
+from tension_zones.calib import Dataset, SegmentModel, equilibrium, motion_direction, tip_position
 from tension_zones.calib.effects import LIBRARY, NOMINAL, play
 from tension_zones.calib.forward import energy
-from tension_zones.calib.model import Problem, engine
+from tension_zones.calib.model import Problem, engine, predict_theta
 
 D3 = tz.Design(3, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=2.0)
 PHYS = SegmentModel(3).physical(D3)
@@ -73,9 +73,9 @@ def test_finite_values_and_gradients_at_the_straight_pose():
     # no preload, no command: b* = 0 exactly, where |b| is not differentiable
     phys = {**PHYS, "preload": jnp.zeros(3)}
     z = jnp.zeros(3)
-    grads = jax.jit(jax.grad(lambda ph: jnp.sum(tip_position(ph, z, z, ONES))))(phys)
+    both = jax.jit(jax.jacfwd(lambda ph, q: tip_position(ph, q, z, ONES), argnums=(0, 1)))
+    grads, Jq = both(phys, z)
     assert all(np.all(np.isfinite(g)) for g in jax.tree_util.tree_leaves(grads))
-    Jq = jax.jit(jax.jacfwd(lambda q: tip_position(phys, q, z, ONES)))(z)
     assert np.all(np.isfinite(Jq)) and np.abs(Jq[:2]).max() > 1.0
 
 
@@ -110,13 +110,10 @@ def test_motion_direction_keeps_last_direction():
     np.testing.assert_array_equal(motion_direction(q)[:, 0], [0, 1, 1, -1, -1, -1, 1])
 
 
-class _Data:
-    def __init__(self, n, seed=0):
-        rng = np.random.default_rng(seed)
-        self.q = rng.uniform(-1, 1, (n, 3))
-        self.f = np.zeros((n, 3))
-        self.p = rng.normal(size=(n, 3)) + [0, 0, 20]
-        self.n_samples, self.n_wires = n, 3
+def _Data(n, seed=0):
+    rng = np.random.default_rng(seed)
+    return Dataset(sample=np.arange(n), q=rng.uniform(-1, 1, (n, 3)), f=np.zeros((n, 3)),
+                   p=rng.normal(size=(n, 3)) + [0, 0, 20])
 
 
 def test_new_values_never_recompile():
@@ -127,9 +124,28 @@ def test_new_values_never_recompile():
     size = engine._cache_size()
     other = tz.Design(3, 25.0, 1.5, wire_angles=[0.1, 2.0, 4.0], wire_stiffness=60.0, backbone_EI=900.0,
                       preload=1.0)
-    data2 = _Data(12, seed=1)
+    data2 = _Data(40, seed=1)  # another size in the same padding bucket
     pb2 = Problem(SegmentModel(3), other, data2, blocks)
-    pb2.fit(pb2.null + 0.01, ["backbone_EI", "backlash", "registration"], np.ones(12), huber_c=0.3,
+    pb2.fit(pb2.null + 0.01, ["backbone_EI", "backlash", "registration"], np.ones(40), huber_c=0.3,
             max_iter=3)
     pb2.jacobian(pb2.null)
     assert engine._cache_size() == size
+
+
+def test_padding_changes_nothing():
+    # the engine pads sample counts to a multiple of 64 at zero weight; results must not notice
+    data = _Data(40, seed=2)
+    pb = Problem(SegmentModel(3), D3, data, NOMINAL + LIBRARY)
+    theta = pb.null.copy()
+    theta[pb.spec.slices()["backlash"]] = [0.1, 0.2, 0.3]
+    direct = jax.jit(predict_theta, static_argnums=0)(pb.spec, jnp.asarray(theta), pb.phys0,
+                                                      SegmentModel(3).inputs(data))
+    np.testing.assert_allclose(pb.predict(theta), direct, atol=1e-12)
+    # padded rows carry no weight: the fit of 40 samples equals that of a set whose 41st..64th
+    # samples are wildly different (they would pull a fit that saw them)
+    wild = Dataset(sample=np.arange(64), q=np.r_[data.q, np.ones((24, 3))], f=np.r_[data.f, np.ones((24, 3))],
+                   p=np.r_[data.p, np.full((24, 3), 50.0)])
+    pb64 = Problem(SegmentModel(3), D3, wild, NOMINAL + LIBRARY)
+    a = pb.fit(pb.null, ["backbone_EI"], np.ones(40), max_iter=10)
+    b = pb64.fit(pb64.null, ["backbone_EI"], np.r_[np.ones(40), np.zeros(24)], max_iter=10)
+    np.testing.assert_allclose(a, b, atol=1e-12)

@@ -126,18 +126,39 @@ def engine(spec, theta0, free, w, c, lo, hi, phys0, inputs, y, max_iter):
     return th, cost, it, r, J
 
 
+#: Sample counts are padded up to a multiple of this (padding repeats the last sample at zero weight,
+#: after the real ones, so path-dependent state is untouched): sets of similar size share one compilation.
+PAD = 64
+
+
+def _pad(data):
+    """The data set with every per-sample array padded (a ``Dataset`` stays a ``Dataset``)."""
+    n = data.n_samples
+    extra = (-n) % PAD
+
+    def rep(a):
+        return np.concatenate([a, np.repeat(a[-1:], extra, axis=0)])
+
+    changes = {f.name: rep(np.asarray(getattr(data, f.name))) for f in dataclasses.fields(data)
+               if isinstance(getattr(data, f.name), np.ndarray) and getattr(data, f.name).shape[:1] == (n,)}
+    return dataclasses.replace(data, **changes)
+
+
 class Problem:
     """A model, its blocks and one data set, ready to fit: the concrete edge around the jitted core."""
 
     def __init__(self, model, design, data, blocks):
         self.model = model
         self.data = data
+        self.n = data.n_samples
+        padded = _pad(data)
         self.phys0 = model.physical(design)
         phys_np = jax.tree_util.tree_map(np.asarray, self.phys0)
         sizes = tuple(int(b.size(phys_np)) for b in blocks)
         self.spec = Spec(model=model, blocks=tuple(blocks), sizes=sizes)
-        self.inputs = model.inputs(data)
-        self.y = jnp.asarray(data.p)
+        self.inputs = model.inputs(padded)
+        self.y = jnp.asarray(padded.p)
+        self.n_padded = self.n + (-self.n) % PAD
         self.null = np.concatenate([b.null(phys_np) for b in blocks])
         self.lo = np.concatenate([b.bounds(phys_np)[0] for b in blocks])
         self.hi = np.concatenate([b.bounds(phys_np)[1] for b in blocks])
@@ -157,21 +178,24 @@ class Problem:
 
     def _run(self, theta0, active, weights, huber_c, max_iter):
         theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
-        out = engine(self.spec, jnp.asarray(theta0), jnp.asarray(self.mask(active)),
-                     jnp.asarray(weights, float), jnp.asarray(huber_c, float), jnp.asarray(self.lo),
-                     jnp.asarray(self.hi), self.phys0, self.inputs, self.y, jnp.asarray(max_iter))
-        return tuple(np.asarray(x) for x in out)
+        w = np.zeros(self.n_padded)
+        w[: self.n] = weights  # padded samples never count
+        out = engine(self.spec, jnp.asarray(theta0), jnp.asarray(self.mask(active)), jnp.asarray(w),
+                     jnp.asarray(huber_c, float), jnp.asarray(self.lo), jnp.asarray(self.hi), self.phys0,
+                     self.inputs, self.y, jnp.asarray(max_iter))
+        th, cost, it, r, J = (np.asarray(x) for x in out)
+        return th, cost, it, r[: self.n], J[: self.n]
 
     def jacobian(self, theta):
         """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta``."""
-        _, _, _, r, J = self._run(theta, [], np.zeros(self.data.n_samples), np.inf, 0)
+        _, _, _, r, J = self._run(theta, [], np.zeros(self.n), np.inf, 0)
         return r, J
 
     def residuals(self, theta) -> np.ndarray:
         return self.jacobian(theta)[0]
 
     def predict(self, theta) -> np.ndarray:
-        return self.residuals(theta) + np.asarray(self.y)
+        return self.residuals(theta) + np.asarray(self.y)[: self.n]
 
     def fit(self, theta0, active, weights, huber_c=np.inf, max_iter=40) -> np.ndarray:
         """Fit the blocks named in ``active`` (the others stay where ``theta0`` has them)."""
