@@ -5,8 +5,10 @@
 3. Refit the best-scoring significant candidates (up to ``TRIES_PER_ROUND``) on the training part;
    a refit counts when its held-out error drops significantly: the drop of the held-out sum of
    squares, in units of the current residual's per-axis variance (at least the noise variance), must
-   exceed the chi-square quantile of the effect's parameter count at ``alpha``, and the held-out RMSE
-   must fall by at least ``min_gain``. Of those, the one with the lowest held-out error is kept
+   exceed the chi-square quantile of the effect's parameter count at ``alpha``, the held-out RMSE
+   must fall by at least ``min_gain``, and the drop of the mean square must be at least
+   ``min_excess`` of its excess over the noise floor (a real effect explains much of what it
+   targets; structure from outside the library lets any flexible effect win a little by chance). Of those, the one with the lowest held-out error is kept
    (effects overlap: a registration explains part of almost anything, the true effect all of it).
    Then a backward step: an earlier effect whose removal no longer raises the held-out error
    significantly (same test) was only standing in for the new one, and is removed.
@@ -106,7 +108,8 @@ def _rmse(r, mask) -> float:
 
 def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINAL,
               holdout: float = 0.25, robust: bool = False, alpha: float = 1e-3,
-              min_gain: float = 0.01, max_rounds: int | None = None, log=None) -> Result:
+              min_gain: float = 0.01, min_excess: float = 0.25, max_rounds: int | None = None,
+              log=None) -> Result:
     """Run the loop on one measurement set. ``log`` (callable taking a str) reports progress."""
     t0 = time.perf_counter()
     say = log or (lambda s: None)
@@ -191,7 +194,11 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
             unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
             drop = (err**2 - err_new**2) * m / unit
             need = chi2_quantile(alpha, max(s["dof"], 1))
-            ok = drop > need and err_new < (1.0 - min_gain) * err
+            # and it must explain a fair share of the error above the noise floor: structure from outside
+            # the library lets any flexible effect win a little by chance, a real effect wins much
+            excess = max(err**2 - noise["floor_mm"] ** 2, 0.0)
+            ok = (drop > need and err_new < (1.0 - min_gain) * err
+                  and err**2 - err_new**2 >= min_excess * excess)
             tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "sse_drop": drop,
                           "needed": need, "significant": bool(ok), "theta": th_new, "err": err_new,
                           "score": s["score"]})
