@@ -32,7 +32,7 @@ from .model import Problem, parameter_std
 
 #: Structure left is claimed when a feature's permutation z-value (or the offset's) exceeds this.
 STRUCTURE_Z = 4.0
-#: ... or when the held-out RMSE exceeds the noise floor by this factor with chi-square z > STRUCTURE_Z.
+#: ... or when the held-out RMSE exceeds the noise floor by this factor with an F-type z > STRUCTURE_Z.
 EXCESS_RATIO = 1.15
 #: Significant candidates refitted per round (best scores first); the lowest held-out error wins.
 TRIES_PER_ROUND = 4
@@ -253,8 +253,11 @@ def calibrate(data: Dataset, design, model=None, library=LIBRARY, nominal=NOMINA
     structure = structure_test(r_after[held], held_feats, sigma)
     m = int(held.sum())
     plain_after, err_after, _ = held_error(theta)
-    excess = {"ratio_to_floor": plain_after / noise["floor_mm"],
-              "z": _chi2_excess_z(err_after**2 * m / float(np.mean(sigma**2)), 3 * m)}
+    # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
+    # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
+    log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
+    sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
+    excess = {"ratio_to_floor": plain_after / noise["floor_mm"], "z": log_ratio / sd}
     structure["excess_over_noise"] = excess
     unexplained = bool(
         any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
@@ -284,6 +287,3 @@ def _z_crit(p: float) -> float:
 
     return _norm_isf(p)
 
-
-def _chi2_excess_z(stat: float, dof: int) -> float:
-    return (stat - dof) / math.sqrt(2.0 * dof)
