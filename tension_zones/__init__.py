@@ -52,10 +52,27 @@ from .zones import (
     tension_score,
 )
 
+from .calib import (  # noqa: E402  (issue 6: calibration)
+    DataError,
+    Dataset,
+    SegmentModel,
+    calibrate,
+    equilibrium,
+    load_csv,
+    write_report,
+)
+
 __version__ = "0.1.0"
 
 __all__ = [
     "BOUNDARY_TOL",
+    "DataError",
+    "Dataset",
+    "SegmentModel",
+    "calibrate",
+    "equilibrium",
+    "load_csv",
+    "write_report",
     "DEFAULT_BACKBONE_EI",
     "DEFAULT_DQ",
     "DEFAULT_WIRE_STIFFNESS",

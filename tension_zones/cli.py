@@ -211,6 +211,46 @@ def _add_sweep_parser(sub) -> None:
 # ---- end sweep (issue 3) -----------------------------------------------------------------------
 
 
+# ---- calibrate (issue 6) ----------------------------------------------------------------------
+def cmd_calibrate(args) -> None:
+    from .calib import DataError, calibrate, load_csv, write_report
+    from .design import Design
+
+    try:
+        design = Design.from_json(args.design)
+        data = load_csv(args.data, n_wires=design.n_wires, length=float(design.length),
+                        drop_bad=args.drop_bad)
+        out = Path(args.out)
+        if out.exists() and not out.is_dir():
+            raise CLIError(f"--out must be a folder, {str(out)!r} is a file")
+        log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
+        res = calibrate(data, design, holdout=args.holdout, robust=args.robust, log=log)
+    except DataError as e:
+        raise CLIError(str(e)) from None
+    report = write_report(res, out)
+    found = ", ".join(e["name"] for e in report["effects"]) or "none"
+    print(f"held-out RMSE: declared {report['rmse_declared_mm']:.4f} mm, nominal fit "
+          f"{report['rmse_before_mm']:.4f} mm, after {report['rmse_after_mm']:.4f} mm "
+          f"(noise floor {report['noise_floor_mm']:.4f} mm); effects added: {found}; "
+          f"unexplained structure: {'yes' if report['unexplained_structure'] else 'no'}; "
+          f"dropped rows: {report['dropped_rows']}")
+    if not args.quiet:
+        print(f"wrote {out / 'report.json'}, {out / 'report.md'} and {len(report['plots'])} plots")
+
+
+def _add_calibrate_parser(sub) -> None:
+    c = sub.add_parser("calibrate", help="fit a design to tracker data, find and add missing effects")
+    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6)")
+    c.add_argument("--design", required=True, help="declared design JSON")
+    c.add_argument("--out", required=True, help="output folder (report.json, report.md, plots)")
+    c.add_argument("--holdout", type=float, default=0.25,
+                   help="fraction held out at the end of the acquisition order (default 0.25)")
+    c.add_argument("--robust", action="store_true", help="Huber loss (tracker glitches)")
+    c.add_argument("--drop-bad", action="store_true",
+                   help="drop isolated bad rows (counted in the report) instead of failing")
+    c.add_argument("--quiet", action="store_true", help="only the one-line summary")
+    c.set_defaults(func=cmd_calibrate)
+# ---- end calibrate ----------------------------------------------------------------------------
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -238,6 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--quiet", action="store_true", help="no progress output")
     r.set_defaults(func=cmd_reproduce)
     _add_sweep_parser(sub)  # issue 3
+    _add_calibrate_parser(sub)
     return p
 
 

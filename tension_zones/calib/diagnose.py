@@ -1,0 +1,191 @@
+"""Residual diagnosis: the noise floor, structure against the inputs, and the score test of effects.
+
+All NumPy (small arrays, after the jitted model has run).
+
+* **Noise floor.** Consecutive samples with the same command and the same load are repeats: the
+  difference of their measurements is pure noise (``var = 2 sigma^2`` per axis), whatever the model
+  lacks. Pairs whose difference is gross (beyond 5 robust sigmas: a tracker glitch) are left out.
+  Without at least 10 such pairs: second differences of the final residual along the acquisition
+  order (``(r[i-1] - 2 r[i] + r[i+1]) / sqrt(6)``; removes any structure that is locally linear).
+  The floor is the 3-D RMSE of pure noise, ``sqrt(sum of the three axis variances)``.
+* **Structure.** For each input feature (bending direction, bending angle, direction of motion,
+  load, sample order), a k-nearest-neighbour leave-one-out smoother predicts the held-out residual
+  from that feature alone; its prediction error is compared with that of residuals shuffled across
+  samples (a permutation test). A mean offset is tested separately (a chi-square on the mean).
+* **Score test.** At the current fit, the held-out residual is projected on the sensitivities of a
+  candidate effect's parameters (``jax.jacfwd`` at the effect's null values) after removing what the
+  already-fitted parameters can explain; ``S = r' P r / sigma^2`` is chi-square with as many degrees
+  of freedom as the effect has parameters when the effect is absent. The score is its z-value.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .data import Dataset
+
+GLITCH_SIGMAS = 5.0
+
+
+def chi2_quantile(p_upper: float, dof: int) -> float:
+    """Upper quantile of chi-square (Wilson-Hilferty; good to a few % for dof >= 1)."""
+    z = _norm_isf(p_upper)
+    a = 2.0 / (9.0 * dof)
+    return dof * max(1.0 - a + z * math.sqrt(a), 0.0) ** 3
+
+
+def chi2_z(stat: float, dof: int) -> float:
+    """z-value of a chi-square statistic (Wilson-Hilferty)."""
+    a = 2.0 / (9.0 * dof)
+    return ((max(stat, 0.0) / dof) ** (1.0 / 3.0) - (1.0 - a)) / math.sqrt(a)
+
+
+def _norm_isf(p: float) -> float:
+    lo, hi = -10.0, 10.0
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        if 0.5 * math.erfc(mid / math.sqrt(2.0)) > p:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def _trimmed_sigma(d: np.ndarray) -> np.ndarray:
+    """Per-axis sigma of zero-mean noise samples ``d`` (M, 3), leaving out gross values."""
+    mad = 1.4826 * np.median(np.abs(d), axis=0)
+    keep = np.all(np.abs(d) <= GLITCH_SIGMAS * np.maximum(mad, 1e-12), axis=1)
+    return np.sqrt(np.mean(d[keep] ** 2, axis=0)), int(keep.sum())
+
+
+def noise_floor(data: Dataset, residual: np.ndarray | None = None) -> dict:
+    """Noise per axis and the 3-D RMSE floor (mm), with the method and number of pairs used."""
+    same = np.all(data.q[1:] == data.q[:-1], axis=1) & np.all(data.f[1:] == data.f[:-1], axis=1)
+    if same.sum() >= 10:
+        d = (data.p[1:] - data.p[:-1])[same] / math.sqrt(2.0)
+        sig, used = _trimmed_sigma(d)
+        method = "repeated samples (same command and load, consecutive)"
+    else:
+        if residual is None:
+            raise ValueError("noise floor: no repeated samples, a residual is needed")
+        d = (residual[:-2] - 2 * residual[1:-1] + residual[2:]) / math.sqrt(6.0)
+        sig, used = _trimmed_sigma(d)
+        method = "second differences of the residual along the acquisition order"
+    return {"sigma_mm": sig.tolist(), "floor_mm": float(np.sqrt(np.sum(sig**2))),
+            "method": method, "pairs": used}
+
+
+# ---------------------------------------------------------------------------------------------
+# Features of each sample (model-agnostic: from the declared model's predicted positions)
+# ---------------------------------------------------------------------------------------------
+def features(data: Dataset, pred_declared: np.ndarray) -> dict:
+    """Per-sample inputs to look for structure in (each (N,) or (N, d)).
+
+    ``bending_direction`` (rad) and ``bending`` (lateral tip offset, mm) of the declared model's
+    prediction; ``motion`` = angle between the tip's last direction of motion (commanded, declared
+    model) and the bending direction (0: bending further, pi: straightening); ``load`` (N, 3);
+    ``order`` = sample index.
+    """
+    xy = pred_declared[:, :2]
+    direction = np.arctan2(xy[:, 1], xy[:, 0])
+    step = np.diff(pred_declared[:, :2], axis=0, prepend=pred_declared[:1, :2])
+    moving = np.linalg.norm(step, axis=1) > 1e-9
+    idx = np.maximum.accumulate(np.where(moving, np.arange(len(step)), 0))
+    last = step[idx]
+    motion_dir = np.where(moving[idx], np.arctan2(last[:, 1], last[:, 0]), np.nan)
+    rel = np.angle(np.exp(1j * (motion_dir - direction)))
+    rel = np.where(np.isfinite(rel), rel, 0.0)
+    return {
+        "bending_direction": direction,
+        "bending": np.linalg.norm(xy, axis=1),
+        "motion": rel,
+        "load": np.asarray(data.f),
+        "order": np.arange(data.n_samples, dtype=float),
+    }
+
+
+_CIRCULAR = ("bending_direction", "motion")
+
+
+def _embed(name: str, x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, float)
+    if name in _CIRCULAR:
+        return np.stack([np.cos(x), np.sin(x)], axis=1)
+    x = x.reshape(len(x), -1)
+    s = np.std(x, axis=0)
+    return (x - x.mean(axis=0)) / np.where(s > 0, s, 1.0)
+
+
+def _knn(X: np.ndarray, k: int, rng) -> np.ndarray:
+    d2 = np.sum((X[:, None, :] - X[None, :, :]) ** 2, axis=-1)
+    np.fill_diagonal(d2, np.inf)
+    # ties (e.g. all unloaded samples) broken at random, not by index: an index order would smuggle
+    # the acquisition order into another feature
+    return np.argsort(d2 + 1e-12 * rng.random(d2.shape), axis=1)[:, :k]
+
+
+def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: int = 1000,
+                   seed: int = 0, k: int | None = None) -> dict:
+    """Is the residual (M, 3) predictable from each feature beyond noise?
+
+    Returns ``{feature: {"explained": fraction of the residual's variance a leave-one-out k-NN smoother
+    predicts, "z": its z-value against residuals shuffled across samples}}`` and ``"mean"``
+    (the offset's chi-square z-value given ``sigma`` per axis).
+    """
+    m = resid.shape[0]
+    k = k or int(np.clip(round(np.sqrt(m)), 5, 20))
+    rng = np.random.default_rng(seed)
+    # winsorise gross values so a tracker glitch cannot make or hide structure
+    mad = 1.4826 * np.median(np.abs(resid - np.median(resid, axis=0)), axis=0)
+    lim = GLITCH_SIGMAS * np.maximum(mad, 1e-12)
+    med = np.median(resid, axis=0)
+    r = np.clip(resid, med - lim, med + lim)
+    r = r - r.mean(axis=0)
+    total = np.sum(r**2)
+    perms = np.stack([rng.permutation(m) for _ in range(n_perm)])
+    out = {}
+    for name, x in feats.items():
+        nb = _knn(_embed(name, x), k, rng)
+        loo = lambda rr: np.sum((rr - rr[nb].mean(axis=1)) ** 2)  # noqa: E731
+        stat = loo(r)
+        null = np.array([loo(r[p]) for p in perms])
+        sd = max(float(np.std(null)), 1e-300)
+        out[name] = {"explained": float(1.0 - stat / total), "z": float((np.mean(null) - stat) / sd)}
+    mean = resid.mean(axis=0)
+    s = float(np.sum(mean**2 / (np.asarray(sigma) ** 2 / m)))
+    out["mean"] = {"offset_mm": mean.tolist(), "z": chi2_z(s, 3)}
+    return out
+
+
+def score_test(r_h: np.ndarray, J_h: np.ndarray, active_cols: np.ndarray, cand_cols: np.ndarray,
+               sigma: np.ndarray, weights: np.ndarray | None = None) -> dict:
+    """Score (Lagrange-multiplier) test of a candidate on held-out residuals.
+
+    Args:
+        r_h: (M, 3) residuals; J_h: (M, 3, P) their sensitivities; active_cols / cand_cols: column
+        indices of the fitted and the candidate parameters; sigma: (3,) noise per axis;
+        weights: optional (M,) robust weights.
+    Returns ``{"score": z, "stat": S, "dof": d, "explained_mm2": r'Pr / M}``.
+    """
+    w = np.ones(len(r_h)) if weights is None else np.asarray(weights)
+    sw = np.sqrt(w)[:, None] / np.asarray(sigma)[None, :]  # whiten per axis
+    r = (r_h * sw).ravel()
+    Jw = J_h * sw[:, :, None]
+    JA = Jw[:, :, active_cols].reshape(-1, len(active_cols))
+    JE = Jw[:, :, cand_cols].reshape(-1, len(cand_cols))
+    if JA.shape[1]:
+        # an orthonormal basis of what the fitted parameters can explain (rank-revealing)
+        UA, sA, _ = np.linalg.svd(JA, full_matrices=False)
+        QA = UA[:, sA > 1e-8 * max(sA.max(initial=0.0), 1e-300)]
+        JE = JE - QA @ (QA.T @ JE)
+        r = r - QA @ (QA.T @ r)
+    U, s, _ = np.linalg.svd(JE, full_matrices=False)
+    rank = int(np.sum(s > 1e-8 * max(s.max(initial=0.0), 1e-300)))
+    if rank == 0:
+        return {"score": 0.0, "stat": 0.0, "dof": 0, "explained_mm2": 0.0}
+    proj = U[:, :rank].T @ r
+    stat = float(proj @ proj)
+    expl = float(np.sum(((U[:, :rank] @ proj).reshape(-1, 3) * np.asarray(sigma)) ** 2) / len(r_h))
+    return {"score": chi2_z(stat, rank), "stat": stat, "dof": rank, "explained_mm2": expl}
