@@ -242,3 +242,12 @@ def test_gradients_agree_with_finite_differences_away_from_switches():
     np.testing.assert_allclose(g_exact, fd, rtol=1e-5, atol=1e-7)
     # the straight-through surrogates only add terms that are small this far from any switch
     np.testing.assert_allclose(g_st, fd, rtol=0.05, atol=0.05 * np.abs(fd).max())
+
+
+def test_readme_documents_every_scenario_key_and_default():
+    import json
+    import pathlib
+
+    readme = (pathlib.Path(__file__).resolve().parents[1] / "README.md").read_text()
+    for key, value in DEFAULTS.items():
+        assert f"| `{key}` | `{json.dumps(value)}` |" in readme, key
