@@ -20,8 +20,16 @@ from .statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, complianc
 #: Paper Tables 1-2: {n_wires: {k_w: (pos mean mm, pos SD mm, ang mean deg, ang SD deg)}}
 #: (reduced Jacobian, no preload; Table 1 is k_w = 75 N/mm).
 PAPER_TABLE = {
-    3: {55: (4.52, 0.150, 33.8, 0.96), 75: (3.052, 0.099, 22.81, 0.621), 105: (2.04, 0.065, 15.3, 0.41)},
-    4: {55: (2.20, 0.066, 16.5, 0.41), 75: (1.558, 0.047, 11.65, 0.287), 105: (1.08, 0.032, 8.06, 0.20)},
+    3: {
+        55: (4.52, 0.150, 33.8, 0.96),
+        75: (3.052, 0.099, 22.81, 0.621),
+        105: (2.04, 0.065, 15.3, 0.41),
+    },
+    4: {
+        55: (2.20, 0.066, 16.5, 0.41),
+        75: (1.558, 0.047, 11.65, 0.287),
+        105: (1.08, 0.032, 8.06, 0.20),
+    },
 }
 #: The paper's headline: the traditional Jacobian underestimates the three-wire deflection by 206 %.
 PAPER_REDUCED_OVER_TRADITIONAL_3 = 3.06
@@ -129,7 +137,9 @@ def identify(initial=None, maxiter: int = 50):
     for start in starts:
         start = np.asarray(start, dtype=float)
         if start.shape != (3,) or not np.all(np.isfinite(start)) or np.any(start <= 0):
-            raise ValueError(f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}")
+            raise ValueError(
+                f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}"
+            )
         init = np.log(start)
         p, its = levenberg_marquardt(_res_jac, init, target, maxiter=maxiter)
         r = np.asarray(_res_jac(p, target)[0])
