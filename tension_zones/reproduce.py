@@ -11,6 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .figures_compliance import compliance_step
+
 
 def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     """Paper Figs. 5 and 7: the three- and four-wire tension maps, with their sector tables."""
@@ -45,14 +47,8 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     return written
 
 
-def _compliance(out: Path, summary: dict, quiet: bool) -> list[Path]:
-    from .figures_compliance import compliance_step
-
-    return compliance_step(out, summary, quiet)
-
-
 STEPS = [("tension maps (Figs. 5, 7)", _tension_maps)]
-STEPS.append(("compliance (Sec. 6.2: identification, Figs. 13-14, Tables 1-2)", _compliance))
+STEPS.append(("compliance (Sec. 6.2: identification, Figs. 13-14, Tables 1-2)", compliance_step))
 
 
 def reproduce(out: Path, quiet: bool = False) -> dict:
