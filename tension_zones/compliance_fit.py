@@ -20,8 +20,16 @@ from .statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, complianc
 #: Paper Tables 1-2: {n_wires: {k_w: (pos mean mm, pos SD mm, ang mean deg, ang SD deg)}}
 #: (reduced Jacobian, no preload; Table 1 is k_w = 75 N/mm).
 PAPER_TABLE = {
-    3: {55: (4.52, 0.150, 33.8, 0.96), 75: (3.052, 0.099, 22.81, 0.621), 105: (2.04, 0.065, 15.3, 0.41)},
-    4: {55: (2.20, 0.066, 16.5, 0.41), 75: (1.558, 0.047, 11.65, 0.287), 105: (1.08, 0.032, 8.06, 0.20)},
+    3: {
+        55: (4.52, 0.150, 33.8, 0.96),
+        75: (3.052, 0.099, 22.81, 0.621),
+        105: (2.04, 0.065, 15.3, 0.41),
+    },
+    4: {
+        55: (2.20, 0.066, 16.5, 0.41),
+        75: (1.558, 0.047, 11.65, 0.287),
+        105: (1.08, 0.032, 8.06, 0.20),
+    },
 }
 #: The paper's headline: the traditional Jacobian underestimates the three-wire deflection by 206 %.
 PAPER_REDUCED_OVER_TRADITIONAL_3 = 3.06
@@ -78,28 +86,32 @@ def _residuals(log_params, target):
     return model_means(log_params) / target - 1.0
 
 
-_res_fn = jax.jit(_residuals)
-_jac_fn = jax.jit(jax.jacfwd(_residuals))  # forward mode: 3 parameters
+def residuals_and_jacobian(fun):
+    """``x -> (fun(x), d fun / dx)`` from one forward-mode pass (one compilation for both)."""
+    jac = jax.jacfwd(lambda x, *a: (fun(x, *a), fun(x, *a)), has_aux=True)
+    return jax.jit(lambda x, *a: jac(x, *a)[::-1])
 
 
-def levenberg_marquardt(res_fn, jac_fn, x0, *args, maxiter: int = 50, tol: float = 1e-12):
+_res_jac = residuals_and_jacobian(_residuals)  # forward mode: 3 parameters
+
+
+def levenberg_marquardt(res_jac, x0, *args, maxiter: int = 50, tol: float = 1e-12):
     """Levenberg-Marquardt (Marquardt's diagonal scaling) on compiled residuals and Jacobian.
 
-    A step whose residuals are not finite (e.g. a parameter set where some workspace pose loses
-    stability and its deflection is flagged NaN) is rejected like any step that does not descend.
-    Returns ``(x, n_accepted_steps)``.
+    ``res_jac(x, *args) -> (r, J)``. A step whose residuals are not finite (e.g. a parameter set
+    where some workspace pose loses stability and its deflection is flagged NaN) is rejected like
+    any step that does not descend. Returns ``(x, n_accepted_steps)``.
     """
     x = jnp.asarray(x0)
-    r, J = res_fn(x, *args), jac_fn(x, *args)
+    r, J = res_jac(x, *args)
     cost, mu, accepted = float(r @ r), 1e-3, 0
     for _ in range(maxiter):
         H, g = J.T @ J, J.T @ r
         step = jnp.linalg.solve(H + mu * jnp.diag(jnp.diag(H)), -g)
-        r_new = res_fn(x + step, *args)
+        r_new, J_new = res_jac(x + step, *args)
         cost_new = float(r_new @ r_new)
         if np.isfinite(cost_new) and cost_new < cost:
-            x, r, cost, mu, accepted = x + step, r_new, cost_new, mu / 3.0, accepted + 1
-            J = jac_fn(x, *args)
+            x, r, J, cost, mu, accepted = x + step, r_new, J_new, cost_new, mu / 3.0, accepted + 1
             if float(jnp.max(jnp.abs(step))) < tol or float(jnp.max(jnp.abs(J.T @ r))) < tol:
                 break
         else:
@@ -125,16 +137,18 @@ def identify(initial=None, maxiter: int = 50):
     for start in starts:
         start = np.asarray(start, dtype=float)
         if start.shape != (3,) or not np.all(np.isfinite(start)) or np.any(start <= 0):
-            raise ValueError(f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}")
+            raise ValueError(
+                f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}"
+            )
         init = np.log(start)
-        p, its = levenberg_marquardt(_res_fn, _jac_fn, init, target, maxiter=maxiter)
-        r = np.asarray(_res_fn(p, target))
+        p, its = levenberg_marquardt(_res_jac, init, target, maxiter=maxiter)
+        r = np.asarray(_res_jac(p, target)[0])
         if np.all(np.isfinite(r)) and (best is None or r @ r < best[2]):
             best = (p, its, float(r @ r))
     if best is None:
         raise ValueError("the identification found no parameter set with a stable workspace")
     p, its, _ = best
-    err = np.asarray(_res_fn(p, target))
+    err = np.asarray(_res_jac(p, target)[0])
     L, r, EI = (float(x) for x in np.exp(np.asarray(p)))
     return {
         "length_mm": L,

@@ -65,8 +65,8 @@ def as_wrench(wrench) -> jnp.ndarray:
 class TensionSolution(NamedTuple):
     """Solution of the tension QP at one pose.
 
-    tau: (n,) tensions (N); lam: (2,) multipliers of the equality, with ``tau = max(f_min, A^T lam)``;
-    feasible: bool, the wires can hold the pose by pulling; kkt_residual: relative KKT violation.
+    tau: (n,) tensions (N); lam: (2,) multipliers of the equality, with
+    ``tau = max(f_min, A^T lam)``; feasible: bool, the wires can hold the pose by pulling; kkt_residual: relative KKT violation.
     """
 
     tau: jax.Array
@@ -84,9 +84,9 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     """Exact solution of ``min ||tau||^2 s.t. A tau = rhs, tau >= f_min`` for ``A`` of shape (2, n).
 
     Closed-form active set: the KKT conditions are ``tau = max(f_min, A^T lam)``, ``A tau = rhs``.
-    For every free set ``S`` (a static enumeration of the ``2^n`` subsets) the free tensions are the
-    minimum-norm solution of ``A_S tau_S = rhs - f_min A 1_{not S}`` and ``lam = pinv(A_S A_S^T)(...)``;
-    the candidate with the smallest KKT violation is returned (the QP is strictly convex, so the
+    For every free set ``S`` (a static enumeration of the ``2^n`` subsets) the free tensions are
+    the minimum-norm solution of ``A_S tau_S = rhs - f_min A 1_{not S}`` and
+    ``lam = pinv(A_S A_S^T)(...)``; the candidate with the smallest KKT violation is returned (the QP is strictly convex, so the
     KKT point is unique in ``tau``). Differentiable: the selected closed form carries the gradient.
     ``feasible`` is False (and the pose must be flagged) when no candidate meets the KKT
     conditions to ``KKT_TOL`` relative, i.e. the wires cannot hold the pose without pushing.
@@ -106,7 +106,7 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
         return tau, lam
 
     taus, lams = jax.vmap(candidate)(S)  # (m, n), (m, 2)
-    viol = jax.vmap(lambda t, l: _kkt_violation(A, rhs, f_min, t, l))(taus, lams)
+    viol = jax.vmap(lambda t, l: kkt_residual(A, rhs, f_min, t, l))(taus, lams)
     viol = jax.lax.stop_gradient(viol)
     i = jnp.argmin(viol)
     tau, lam = taus[i], lams[i]
@@ -123,7 +123,7 @@ def _kkt_scale(A, rhs, f_min, tau):
 
 
 def kkt_residual(A, rhs, f_min, tau, lam):
-    """Relative KKT violation of ``(tau, lam)``: ``|A tau - rhs|`` and ``|tau - max(f_min, A^T lam)|``.
+    """Relative KKT violation: ``|A tau - rhs|`` and ``|tau - max(f_min, A^T lam)|``.
 
     Both are zero exactly at the optimum (stationarity, bounds, dual feasibility and
     complementarity are all in ``tau = max(f_min, A^T lam)``); scaled by ``|rhs| + |A| max tau``.
@@ -133,14 +133,11 @@ def kkt_residual(A, rhs, f_min, tau, lam):
     return (primal + station) / _kkt_scale(A, rhs, f_min, tau)
 
 
-def _kkt_violation(A, rhs, f_min, tau, lam):
-    return kkt_residual(A, rhs, f_min, tau, lam)
-
-
 def equilibrium_b(design: Design, b, wrench):
     """The equilibrium ``A tau = rhs`` in bending-vector coordinates at one pose.
 
-    ``A = J_qb^T`` (2, n), ``rhs = J_xb^T w - grad_b U`` (2,), ``U = EI |b|^2 / (2L)`` (MODEL.md Sec. 4-5).
+    ``A = J_qb^T`` (2, n), ``rhs = J_xb^T w - grad_b U`` (2,), ``U = EI |b|^2 / (2L)``
+    (MODEL.md Sec. 4-5).
     """
     w = as_wrench(wrench)
     A = J_qb(design, b).T
@@ -160,8 +157,8 @@ def tensions(design: Design, theta_L, delta, wrench) -> TensionSolution:
 def taut_mask(design: Design, tau):
     """The statics taut set, (n,) 0/1 with a straight-through gradient (MODEL.md Sec. 4).
 
-    Without preload: ``tau_k > 1e-6 max_j tau_j``; with a preload every wire is taut. Gradient: that of
-    ``sigmoid((tau_k / max tau - 1e-6) / STATICS_TEMPERATURE)`` (zero with a preload).
+    Without preload: ``tau_k > 1e-6 max_j tau_j``; with a preload every wire is taut.
+    Gradient: that of ``sigmoid((tau_k / max tau - 1e-6) / STATICS_TEMPERATURE)`` (zero with a preload).
     """
     tmax = jnp.max(tau)
     pos = tmax > 0
@@ -286,7 +283,8 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
 
 #: Jitted :func:`compliance_pose` (``design`` values and the wrench are traced: no recompile).
 compliance_pose_jit = jax.jit(compliance_pose)
-#: ``over_grid`` lift of :func:`compliance_pose`, jitted: ``(design, theta_L (T,), delta (D,), wrench)``.
+#: ``over_grid`` lift of :func:`compliance_pose`, jitted:
+#: ``(design, theta_L (T,), delta (D,), wrench) -> dict``.
 compliance_grid_jit = jax.jit(over_grid(compliance_pose))
 
 
