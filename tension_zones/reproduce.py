@@ -12,7 +12,6 @@ from pathlib import Path
 import numpy as np
 
 
-
 def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     """Paper Figs. 5 and 7: the three- and four-wire tension maps, with their sector tables."""
     import matplotlib.pyplot as plt
