@@ -231,8 +231,34 @@ def _task(sc: Scenario) -> _Task:
                  f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]), f(span))
 
 
-def _bounds(sc: Scenario, n: int) -> _Bounds:
+def _arc_slack(sc: Scenario, n: int, r: float) -> float:
+    """Angle left over (rad) when n wires of radius r sit in the allowed arc with their gaps."""
+    s_min = float(_min_angle(sc.wire_diameter + sc.min_wire_gap, r))
+    if sc.forbidden_arc is None:
+        return 2 * math.pi - n * s_min
+    h = float(_min_angle(2 * (0.5 * sc.wire_diameter + sc.min_wire_gap), r)) / 2
+    arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
+    return arc_len - 2 * h - (n - 1) * s_min
+
+
+def _r_range(sc: Scenario, n: int) -> tuple[float, float]:
+    """Pitch-radius range for n wires: the scenario's bounds with the geometric limits, and with
+    free angles the smallest radius at which the wires still fit their arc (the slack grows with r,
+    so bisection finds it)."""
     r_lo, r_hi = sc.r_bounds(n)
+    if sc.free_wire_angles and r_lo <= r_hi and _arc_slack(sc, n, r_lo) < 0:
+        if _arc_slack(sc, n, r_hi) < 0:
+            return r_hi, r_lo  # empty
+        a, b = r_lo, r_hi
+        for _ in range(60):
+            m = 0.5 * (a + b)
+            a, b = (m, b) if _arc_slack(sc, n, m) < 0 else (a, m)
+        r_lo = b
+    return r_lo, r_hi
+
+
+def _bounds(sc: Scenario, n: int) -> _Bounds:
+    r_lo, r_hi = _r_range(sc, n)
     arc0, arc_len = 0.0, 2 * math.pi
     if sc.forbidden_arc is not None:
         arc0 = sc.forbidden_arc[1]
@@ -246,17 +272,6 @@ def _bounds(sc: Scenario, n: int) -> _Bounds:
 def _base(sc: Scenario, n: int) -> Design:
     return Design(n, sc.length, max(sc.pitch_radius[1], 1e-3), backbone_EI=sc.backbone_EI,
                   preload=sc.preload)
-
-
-def _feasible_arc(sc: Scenario, n: int, r: float) -> bool:
-    if not sc.free_wire_angles:
-        return True
-    s_min = float(_min_angle(sc.wire_diameter + sc.min_wire_gap, r))
-    if sc.forbidden_arc is None:
-        return n * s_min <= 2 * math.pi + 1e-12
-    h = float(_min_angle(2 * (0.5 * sc.wire_diameter + sc.min_wire_gap), r)) / 2
-    arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
-    return arc_len - 2 * h - (n - 1) * s_min >= 0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -356,8 +371,8 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
     rows, hist, evaluations = [], {}, 0
     counts = tqdm(sc.n_wires, desc="wire counts", disable=not progress, leave=False)
     for n in counts:
-        r_lo, r_hi = sc.r_bounds(n)
-        if r_lo > r_hi or not _feasible_arc(sc, n, r_hi):
+        r_lo, r_hi = _r_range(sc, n)
+        if r_lo > r_hi:
             rows.append({"n_wires": n, "feasible": False,
                          "reason": "the geometric constraints leave no room for this many wires"})
             continue

@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import example, given
 from hypothesis import strategies as st
 
 import tension_zones as tz
@@ -74,13 +74,15 @@ def _sc(arc=None, **kw):
     return parse_scenario(d)
 
 
+@example(6, 0.0, 0.0, 0.0, [0.0] * 9, True)  # regression: smallest radius with a forbidden arc
 @given(st.integers(3, 8), st.floats(0, 1), st.floats(0, 1), st.floats(-10, 10),
        st.lists(st.floats(-6, 6), min_size=9, max_size=9), st.booleans())
 def test_parametrisation_meets_constraints(n, zr, zk, za, zg, with_arc):
     sc = _sc(arc=[150.0, 210.0] if with_arc else None)
-    b = opt._bounds(sc, n)
-    if not opt._feasible_arc(sc, n, float(b.r_hi)):
+    lo, hi = opt._r_range(sc, n)
+    if lo > hi:  # no room for n wires: the optimiser reports the count infeasible
         return
+    b = opt._bounds(sc, n)
     zg = jnp.asarray(zg[: n + 1 if with_arc else n])
     z = {"r": jnp.asarray(zr), "k": jnp.asarray(zk), "a0": jnp.asarray(za), "gaps": zg}
     d = opt._design(z, b, n, True, with_arc, opt._base(sc, n))
@@ -251,3 +253,17 @@ def test_readme_documents_every_scenario_key_and_default():
     readme = (pathlib.Path(__file__).resolve().parents[1] / "README.md").read_text()
     for key, value in DEFAULTS.items():
         assert f"| `{key}` | `{json.dumps(value)}` |" in readme, key
+
+
+@given(st.integers(3, 4), st.lists(st.floats(0.0, 2 * np.pi), min_size=4, max_size=4))
+def test_full_circle_controllability_needs_five_wires(n, angles):
+    # the open half-planes of a direction and its opposite hold at most n - 1 wires when their
+    # dividing line passes through a wire: three or four wires always leave a direction with one
+    a = np.sort(np.mod(angles[:n], 2 * np.pi))
+    if np.min(np.diff(np.concatenate([a, a[:1] + 2 * np.pi]))) < 1e-3:
+        return  # coincident wires are not a design
+    d = tz.Design(n, 20.0, 2.0, wire_angles=a)
+    spreads = jax.vmap(lambda x: opt.spread(d, x))(opt.zone_boundaries(d))
+    assert float(jnp.min(spreads)) == 0.0
+    five = tz.Design(5, 20.0, 2.0)
+    assert float(jnp.min(jax.vmap(lambda x: opt.spread(five, x))(opt.zone_boundaries(five)))) > 0.5
