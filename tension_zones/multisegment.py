@@ -333,10 +333,12 @@ def tension_mask(robot: Robot, B, B_dot=None, temperature=TEMPERATURE):
 def J_xq(robot: Robot, B, mask=None):
     """``J_xB pinv(J_qB)``, (6, N); ``mask`` (N,) keeps only the taut wires' rows (reduced)."""
     Jx, Jq = J_xB(robot, B), J_qB(robot)
-    if mask is not None:
-        Jq = Jq * jnp.asarray(mask, Jq.dtype)[:, None]
+    if mask is None:
+        mask = jnp.ones(robot.n_wires, Jq.dtype)
+    mask = jnp.asarray(mask, Jq.dtype)
+    Jq = Jq * mask[:, None]
     pinv = pinv_tall2(Jq) if robot.n_segments == 1 else jnp.linalg.pinv(Jq)
-    return Jx @ pinv
+    return Jx @ (pinv * mask[None, :])  # slack wires' columns exactly zero
 
 
 def reduced_J_xq(robot: Robot, B, B_dot=None):
@@ -374,9 +376,20 @@ def energy(robot: Robot, B, q, load: Load | None = None):
     return V if load is None else V + load_potential(robot, B, load)
 
 
+def _grad(robot, x, q, load):
+    """Gradient of ``V`` in ``x = vec(B)``: closed form for the backbone and the wires (wire
+    lengths are linear in ``B``), autodiff for the load."""
+    S = robot.n_segments
+    kb = jnp.repeat(robot.backbone_EI / robot.lengths, 2)
+    tau = wire_tensions(robot, x.reshape(S, 2), q)
+    g = kb * x + J_qB(robot).T @ tau
+    if load is not None:
+        g = g + jax.grad(lambda xx: load_potential(robot, xx.reshape(S, 2), load))(x)
+    return g
+
+
 def _grad_hess(robot, x, q, load):
-    """Gradient and Hessian of ``V`` in ``x = vec(B)``: closed form for the backbone and the wires
-    (wire lengths are linear in ``B``), autodiff for the load."""
+    """Gradient and Hessian of ``V`` in ``x = vec(B)``."""
     S = robot.n_segments
     Jq = J_qB(robot)
     kb = jnp.repeat(robot.backbone_EI / robot.lengths, 2)
@@ -432,7 +445,7 @@ def _equilibrium_jvp(primals, tangents):
     robot, q, load, B0 = primals
     B = _newton(robot, q, load, B0)
     x = B.reshape(-1)
-    grad_at_x = lambda r, qq, ld: _grad_hess(r, x, qq, ld)[0]  # noqa: E731
+    grad_at_x = lambda r, qq, ld: _grad(r, x, qq, ld)  # noqa: E731
     _, dg = jax.jvp(grad_at_x, (robot, q, load), tuple(tangents[:3]))
     H = _grad_hess(robot, x, q, load)[1]
     return B, (-jnp.linalg.solve(H, dg)).reshape(B.shape)

@@ -346,7 +346,7 @@ def group_holdout(groups, every: int = 4, offset: int = 3):
     return np.nonzero(~held)[0], np.nonzero(held)[0]
 
 
-def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, verbose=False):
+def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, init=None, verbose=False):
     """Add effects one at a time in the given order; keep one only if the held-out RMSE (whole
     pattern groups of the training data) drops by more than ``min_gain`` (relative).
 
@@ -354,7 +354,7 @@ def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, verbose=Fa
     """
     fit_idx, held_idx = group_holdout(groups)
     kept: list[str] = []
-    res = fit(robot, Q, P, kept, fit_idx)
+    res = fit(robot, Q, P, kept, fit_idx, init=init)
     best = rmse(predict(robot, res.params, Q)[held_idx], P[held_idx])
     hist = [dict(effect="base", kept=True, rmse_holdout_mm=best, fit=res)]
     if verbose:
