@@ -16,7 +16,9 @@ Every effect is a named set of *bounded* physical parameters (``EFFECTS``); a fi
 effect names. Parameters map to an unbounded vector through ``c + w tanh(z)``; the fit is a
 Levenberg-Marquardt least-squares with Jacobians by forward-mode autodiff (implicit differentiation
 through the equilibrium). Uncertainty: the Gauss-Newton covariance ``s^2 (J^T J)^-1`` in physical
-units (``s^2`` the residual variance; consecutive samples are correlated, so it is optimistic).
+units (``s^2`` the residual variance; consecutive samples are correlated and the model is not
+exact, so it is optimistic; a parameter sitting at its bound is reported but its std is not
+meaningful).
 """
 
 from __future__ import annotations
@@ -214,10 +216,6 @@ def _from_z(blocks, z):
     return out
 
 
-def _flatten_phys(blocks, params):
-    return jnp.concatenate([jnp.ravel(params[k]) for k in blocks])
-
-
 def _unflatten_phys(blocks, x):
     out, i = {}, 0
     for k, b in blocks.items():
@@ -271,7 +269,7 @@ def fit(robot: Robot, Q, P, effects=(), fit_idx=None, init=None, max_iter=30, ve
         if rel < 1e-6:
             break
     params = _from_z(blocks, z)
-    std = _covariance_std(robot, blocks, params, Q, P, fit_idx)
+    std = _std_from_jacobian(blocks, z, np.asarray(jac(z)), np.asarray(r))
     return FitResult(
         tuple(effects),
         {k: np.asarray(v) for k, v in params.items()},
@@ -282,43 +280,18 @@ def fit(robot: Robot, Q, P, effects=(), fit_idx=None, init=None, max_iter=30, ve
     )
 
 
-def _covariance_std(robot, blocks, params, Q, P, fit_idx):
-    """Gauss-Newton standard deviations in physical units (pinv: a flat direction shows as a huge
-    std rather than an error)."""
-    x0 = _flatten_phys(blocks, params)
-
-    def resid_x(x):
-        return (predict(robot, _unflatten_phys(blocks, x), Q)[fit_idx] - P[fit_idx]).ravel()
-
-    J = np.asarray(jax.jit(jax.jacfwd(resid_x))(x0))
-    r = np.asarray(resid_x(x0))
-    dof = max(len(r) - J.shape[1], 1)
-    s2 = float(r @ r) / dof
-    cov = s2 * np.linalg.pinv(J.T @ J)
+def _std_from_jacobian(blocks, z, Jz, r):
+    """Gauss-Newton standard deviations in physical units: ``s^2 (J^T J)^-1`` with ``J`` the
+    Jacobian in physical parameters (chain rule through ``c + w tanh(z)``). A tiny relative ridge
+    keeps the inverse finite: a parameter the data cannot see gets a huge std, never a small one."""
+    w = np.concatenate([np.full(int(np.prod(b.shape)), 0.5 * (b.hi - b.lo)) for b in blocks.values()])
+    d = w * (1.0 - np.tanh(np.asarray(z)) ** 2)
+    J = Jz / np.maximum(d, 1e-300)[None, :]
+    A = J.T @ J
+    s2 = float(r @ r) / max(len(r) - J.shape[1], 1)
+    ridge = 1e-14 * np.trace(A) / len(A)
+    cov = s2 * np.linalg.inv(A + ridge * np.eye(len(A)))
     return {k: np.asarray(v) for k, v in _unflatten_phys(blocks, np.sqrt(np.abs(np.diag(cov)))).items()}
-
-
-def initial_segment_angles(robot: Robot, Q, P, labels):
-    """Starting values of ``segment_angle`` from single-tendon pulls (labels ``..._tendon<i>_...``):
-    pulling wire ``k`` alone bends every segment it crosses toward its angle, so the tip moves
-    toward it. Per segment, the circular mean of (tip direction - nominal wire angle); 0 where a
-    segment has no such pull."""
-    import re
-
-    Q, P = np.asarray(Q), np.asarray(P)
-    nominal = np.asarray(robot.wire_angles)
-    owner = robot.owner
-    sums = np.zeros(robot.n_segments, complex)
-    for k in range(robot.n_wires):
-        rows = [i for i, lab in enumerate(labels) if re.search(rf"_tendon{k}_id\d+_pull$", lab)]
-        if len(rows) < 2:
-            continue
-        rows = np.asarray(rows)
-        i_max = rows[np.argmin(Q[rows, k])]  # most pulled in (negative = pulled)
-        d = P[i_max, :2] - P[rows[0], :2]
-        if np.hypot(*d) > 0:
-            sums[owner[k]] += np.exp(1j * (np.arctan2(d[1], d[0]) - nominal[k]))
-    return np.where(np.abs(sums) > 0, np.angle(sums), 0.0)
 
 
 # --------------------------------------------------------------------------------------------
