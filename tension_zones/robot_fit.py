@@ -319,9 +319,12 @@ def group_holdout(groups, every: int = 4, offset: int = 3):
     return np.nonzero(~held)[0], np.nonzero(held)[0]
 
 
-def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, init=None, verbose=False):
+def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, init=None, max_passes=2,
+                      verbose=False):
     """Add effects one at a time in the given order; keep one only if the held-out RMSE (whole
-    pattern groups of the training data) drops by more than ``min_gain`` (relative).
+    pattern groups of the training data) drops by more than ``min_gain`` (relative). Effects
+    dropped in one pass are tried again in the next (another effect may have unmasked them), until
+    a pass keeps nothing or ``max_passes`` is reached.
 
     Returns ``(kept effects, history)``, history rows ``{effect, kept, rmse_holdout_mm, fit}``.
     """
@@ -332,14 +335,20 @@ def forward_selection(robot, Q, P, groups, candidates, min_gain=0.02, init=None,
     hist = [dict(effect="base", kept=True, rmse_holdout_mm=best, fit=res)]
     if verbose:
         print(f"base: held-out {best:.3f} mm", flush=True)
-    for e in candidates:
-        trial = fit(robot, Q, P, kept + [e], fit_idx, init=res.params)
-        h = rmse(predict(robot, trial.params, Q)[held_idx], P[held_idx])
-        keep = h < best * (1 - min_gain)
-        hist.append(dict(effect=e, kept=keep, rmse_holdout_mm=h, fit=trial))
-        if verbose:
-            print(f"+{e}: held-out {h:.3f} mm -> {'kept' if keep else 'dropped'}", flush=True)
-        if keep:
-            kept.append(e)
-            res, best = trial, h
+    todo = list(candidates)
+    for _ in range(max_passes):
+        added = False
+        for e in list(todo):
+            trial = fit(robot, Q, P, kept + [e], fit_idx, init=res.params)
+            h = rmse(predict(robot, trial.params, Q)[held_idx], P[held_idx])
+            keep = h < best * (1 - min_gain)
+            hist.append(dict(effect=e, kept=keep, rmse_holdout_mm=h, fit=trial))
+            if verbose:
+                print(f"+{e}: held-out {h:.3f} mm -> {'kept' if keep else 'dropped'}", flush=True)
+            if keep:
+                kept.append(e)
+                todo.remove(e)
+                res, best, added = trial, h, True
+        if not added or not todo:
+            break
     return kept, hist
