@@ -24,6 +24,7 @@ meaningful).
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import jax
 import jax.numpy as jnp
@@ -292,6 +293,27 @@ def _std_from_jacobian(blocks, z, Jz, r):
     ridge = 1e-14 * np.trace(A) / len(A)
     cov = s2 * np.linalg.inv(A + ridge * np.eye(len(A)))
     return {k: np.asarray(v) for k, v in _unflatten_phys(blocks, np.sqrt(np.abs(np.diag(cov)))).items()}
+
+
+def initial_segment_angles(robot: Robot, Q, P, labels):
+    """Starting values of ``segment_angle`` from single-tendon pulls (labels ``..._tendon<i>_...``):
+    pulling wire ``k`` alone bends every segment it crosses toward its angle, so the tip moves
+    toward it. Per segment, the circular mean of (tip direction - nominal wire angle); 0 where a
+    segment has no such pull."""
+    Q, P = np.asarray(Q), np.asarray(P)
+    nominal = np.asarray(robot.wire_angles)
+    owner = robot.owner
+    sums = np.zeros(robot.n_segments, complex)
+    for k in range(robot.n_wires):
+        rows = [i for i, lab in enumerate(labels) if re.search(rf"_tendon{k}_id\d+_pull$", lab)]
+        if len(rows) < 2:
+            continue
+        rows = np.asarray(rows)
+        i_max = rows[np.argmin(Q[rows, k])]  # most pulled in (negative = pulled)
+        d = P[i_max, :2] - P[rows[0], :2]
+        if np.hypot(*d) > 0:
+            sums[owner[k]] += np.exp(1j * (np.arctan2(d[1], d[0]) - nominal[k]))
+    return np.where(np.abs(sums) > 0, np.angle(sums), 0.0)
 
 
 # --------------------------------------------------------------------------------------------
