@@ -83,8 +83,10 @@ def test_fit_recovers_known_parameters_on_a_synthetic_two_segment_set():
              "pretension": np.array([0.3, -0.2])}
     P = np.asarray(rf.predict(robot, {k: jnp.asarray(v) for k, v in truth.items()}, Q))
     P = P + 0.05 * rng.normal(size=P.shape)
-    res = rf.fit(robot, Q, P, ["pretension"], init={"segment_angle": np.radians([10.0, -20.0])},
-                 max_iter=15)
+    labels = [f"rep1_tendon{k}_id{k + 1}_pull" for k in range(6) for _ in range(12)] + ["rnd"] * 60
+    a0 = rf.initial_segment_angles(robot, Q, P, labels)
+    np.testing.assert_allclose(a0, truth["segment_angle"], atol=np.radians(10.0))
+    res = rf.fit(robot, Q, P, ["pretension"], init={"segment_angle": a0}, max_iter=15)
     assert res.rmse_fit_mm < 0.1
     for k, v in truth.items():
         err = np.abs(res.params[k] - v)
