@@ -159,19 +159,30 @@ def _sv2_parts(parts, g00, g01, g11, det_Gp):
 
 def _zonogon_vertices_cols(g0, g1):
     """:func:`zonogon_vertices` on generators given as two lists of n scalars; the 2n vertices as
-    ``(x, y)`` pairs, ``+`` vertices first. Elementwise, so that vmapped it fuses."""
+    ``(x, y)`` pairs, ``+`` vertices first. Elementwise, so that vmapped it fuses.
+
+    Each pair is tested once: ``parallel`` and ``sign(g_j . g_k)`` are symmetric and, outside the
+    parallel band (``|C| > 1e3 eps |g_j||g_k|``, far above its rounding error), ``sign(C)`` is
+    antisymmetric whatever the compiler does with FMAs; inside it the sign is not used. ``g_j`` with
+    itself is always parallel (side 0, edge 1).
+    """
     n = len(g0)
     nrm = [jnp.sqrt(jax.lax.stop_gradient(g0[j] * g0[j] + g1[j] * g1[j])) for j in range(n)]
     tol = PARALLEL_TOL * eps_of(g0[0])
+    coef = [[None] * n for _ in range(n)]  # (side, edge) of generator k at vertex j
+    for j in range(n):
+        coef[j][j] = (0.0, 1.0)
+        for k in range(j + 1, n):
+            C = g0[j] * g1[k] - g1[j] * g0[k]
+            parallel = jnp.abs(C) <= tol * nrm[j] * nrm[k]
+            side = jnp.where(parallel, 0.0, jnp.sign(C))
+            edge = jnp.where(parallel, jnp.sign(g0[j] * g0[k] + g1[j] * g1[k]), 0.0)
+            coef[j][k], coef[k][j] = (side, edge), (-side, edge)
     plus, minus = [], []
     for j in range(n):
         px = py = mx = my = 0.0
         for k in range(n):
-            C = g0[j] * g1[k] - g1[j] * g0[k]
-            parallel = jnp.abs(C) <= tol * nrm[j] * nrm[k]  # incl. k = j
-            side = jnp.where(parallel, 0.0, jnp.sign(C))
-            # the edge along g_j, signed consistently; g_j itself even if |g_j|^2 flushes
-            edge = 1.0 if k == j else jnp.where(parallel, jnp.sign(g0[j] * g0[k] + g1[j] * g1[k]), 0.0)
+            side, edge = coef[j][k]
             px, py = px + (side + edge) * g0[k], py + (side + edge) * g1[k]
             mx, my = mx + (side - edge) * g0[k], my + (side - edge) * g1[k]
         plus.append((px, py))
