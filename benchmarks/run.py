@@ -207,11 +207,12 @@ def markdown(res) -> str:
     m = res["machine"]
     out = [f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
            f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`.", ""]
-    out += ["### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)", "",
-            "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
-            "x loop | x NumPy | compile (s) | target |",
-            "|---|---|---|---|---|---|---|---|"]
-    for r in res["kinematics"]:
+    if "kinematics" in res:  # --only may leave a section out
+        out += ["### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)", "",
+                "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
+                "x loop | x NumPy | compile (s) | target |",
+                "|---|---|---|---|---|---|---|---|"]
+    for r in res.get("kinematics", []):
         tgt = 3e6 if r["n_wires"] in (3, 4) else 1e6
         ok = (r["jax_poses_per_s"] >= tgt and r["speedup_vs_loop"] >= 300
               and r["speedup_vs_numpy"] >= 3 and r["jax_compile_s"] < 5)

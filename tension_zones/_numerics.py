@@ -81,6 +81,22 @@ def frozen_masks():
         _SURROGATE.pop()
 
 
+def keep(xs):
+    """The list of same-shape arrays ``xs`` unchanged, computed once: a fusion barrier for XLA:CPU.
+
+    XLA:CPU has no multi-output fusion: it re-computes a fusible producer inside the loop of every
+    consumer, so a pose's sines and cosines were evaluated once per output measure (17 outputs, ~80
+    transcendentals per pose). A product with the 2x2 identity is a library call it cannot fuse
+    through, so its operands are materialised once. Exact for finite values (``1 x + 0 y = x``; a
+    ``-0.0`` may become ``+0.0``); linear, so gradients pass unchanged.
+    """
+    xs = list(xs)
+    pad = [jnp.zeros_like(xs[0])] if len(xs) % 2 else []
+    v = jnp.stack(xs + pad, axis=-1)
+    v = (v.reshape(v.shape[:-1] + (-1, 2)) @ jnp.eye(2, dtype=v.dtype)).reshape(v.shape)
+    return [v[..., i] for i in range(len(xs))]
+
+
 def straight_through(hard, soft):
     """Forward value exactly ``hard``; gradient that of ``soft``.
 
@@ -136,3 +152,30 @@ def pinv_tall2(J):
         rank2, adj / det_safe, jnp.where(rank_pos, G / tr_safe**2, jnp.zeros_like(G))
     )
     return G_pinv @ J.T
+
+
+def pinv_tall2_cols(a, b):
+    """:func:`pinv_tall2` with the matrix given by its two columns ``a``, ``b`` as lists of ``n`` scalars.
+
+    Returns the rows of the (2, n) pseudo-inverse as two lists. The same formulas written elementwise:
+    vmapped over poses these are plain (N,) arrays that XLA fuses, where the matrix form becomes
+    tiny batched matmuls and ``triu_indices`` gathers.
+    """
+    n = len(a)
+    g00 = sum(x * x for x in a)
+    g01 = sum(x * y for x, y in zip(a, b))
+    g11 = sum(y * y for y in b)
+    det = sum((a[i] * b[j] - b[i] * a[j]) ** 2 for i in range(n) for j in range(i + 1, n))
+    tr = g00 + g11
+    rcond = max(n, 2) * eps_of(a[0])
+    rank2 = det > (rcond * tr) ** 2
+    rank_pos = tr > 0
+    det_safe = jnp.where(rank2, det, 1.0)
+    tr_safe = jnp.where(rank_pos, tr, 1.0)
+
+    def inv(adj, g):  # one entry of pinv(G): adj / det (rank 2), G / tr^2 (rank 1), 0
+        return jnp.where(rank2, adj / det_safe, jnp.where(rank_pos, g / tr_safe**2, 0.0))
+
+    i00, i01, i11 = inv(g11, g00), inv(-g01, g01), inv(g00, g11)
+    return [i00 * x + i01 * y for x, y in zip(a, b)], [i01 * x + i11 * y for x, y in zip(a, b)]
+

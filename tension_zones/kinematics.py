@@ -75,7 +75,15 @@ def J_xpsi(design: Design, theta_L, delta):
     evaluated by series near ``T = 0`` so values and gradients are finite at the straight pose.
     """
     theta_L, delta = _as_float(design, theta_L, delta)
-    L = design.length
+    return J_xpsi_from_terms(design.length, J_xpsi_terms(theta_L, delta))
+
+
+def J_xpsi_terms(theta_L, delta):
+    """The transcendental part of :func:`J_xpsi`: ``(T, c, s, sd, cd, A/T^2, (s - 1)/T, (T s + c)/T^2)``.
+
+    Split out so that a caller evaluating many measures per pose can compute these once (and keep
+    them, see :func:`tension_zones._numerics.keep`); :func:`J_xpsi_from_terms` does the rest.
+    """
     T = theta_L - THETA_0
     T2 = T * T
     c = jnp.cos(theta_L)
@@ -85,6 +93,13 @@ def J_xpsi(design: Design, theta_L, delta):
     a_over_T2 = versinc_sq(T2) - sinc_sq(T2)
     s1_over_T = -T * versinc_sq(T2)
     z_term = T * cubic_sq(T2)
+    s = jnp.sin(theta_L)
+    return T, c, s, sd, cd, a_over_T2, s1_over_T, z_term
+
+
+def J_xpsi_from_terms(L, terms):
+    """:func:`J_xpsi` (6, 2) from the backbone length and :func:`J_xpsi_terms`."""
+    T, c, s, sd, cd, a_over_T2, s1_over_T, z_term = terms
     z = jnp.zeros_like(T)
     Jv = L * jnp.array(
         [
@@ -93,7 +108,6 @@ def J_xpsi(design: Design, theta_L, delta):
             [z_term, z],
         ]
     )
-    s = jnp.sin(theta_L)
     Jw = jnp.array([[-sd, cd * c], [-cd, -sd * c], [z, -1.0 + s]])
     return jnp.concatenate([Jv, Jw], axis=0)
 

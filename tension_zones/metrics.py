@@ -14,14 +14,15 @@ maximum of any convex norm (:func:`zonogon_vertices`). No SVD, no ``3^n`` or ``2
 
 from __future__ import annotations
 
+import functools
+
 import jax
 import jax.numpy as jnp
-import numpy as np
 
-from ._numerics import eps_of, pinv_tall2
+from ._numerics import eps_of, keep, pinv_tall2_cols
 from .design import Design
-from .kinematics import jacobians
-from .zones import tension_mask
+from .kinematics import J_xpsi_from_terms, J_xpsi_terms, _as_float
+from .zones import mask_from_score
 
 #: The paper's headline joint-level uncertainty (mm), Figs. 11-12.
 DEFAULT_DQ = 0.4
@@ -116,15 +117,111 @@ def zonogon_vertices(G):
     return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
 
 
-def _masked_Jq(design: Design, theta_L, delta, mask):
-    Jx, Jq = jacobians(design, theta_L, delta)
-    if mask is not None:
-        mask = jnp.asarray(mask, Jq.dtype)
-        if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
-            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
-                             f"got {mask.shape}")
-        Jq = Jq * mask[:, None]
-    return Jx, Jq
+def _pose_inputs(design: Design, theta_L, delta):
+    """What every measure of one pose needs, computed once: ``J_xpsi`` (6, 2), the columns ``a``, ``b``
+    of ``J_qpsi`` and the tension scores ``cos(delta_k)`` (lists of n scalars).
+
+    The sines and cosines are kept (:func:`~tension_zones._numerics.keep`): otherwise XLA:CPU
+    re-evaluates them inside the loop of each of the 17 outputs. Same formulas as
+    :func:`~tension_zones.kinematics.jacobians` and :func:`~tension_zones.tension_mask`.
+    """
+    theta_L, delta = _as_float(design, theta_L, delta)
+    n = design.n_wires
+    delta_k = delta + design.wire_angles
+    cos_k, sin_k = jnp.cos(delta_k), jnp.sin(delta_k)
+    kept = keep(list(J_xpsi_terms(theta_L, delta)) + [cos_k[k] for k in range(n)]
+                + [sin_k[k] for k in range(n)])
+    terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
+    T, r = terms[0], design.pitch_radius
+    a = [r * c for c in cos_k]
+    b = [-r * T * s for s in sin_k]
+    return J_xpsi_from_terms(design.length, terms), a, b, cos_k
+
+
+def _block_parts(A):
+    """The pose-only pieces of :func:`_sv2` for a (3, 2) block (shared by full and reduced)."""
+    a1, a2 = A[:, 0], A[:, 1]
+    det_H = jnp.sum(jnp.cross(a1, a2) ** 2)
+    r00 = _sqrt0(jnp.dot(a1, a1))
+    return det_H, r00, _div0(jnp.dot(a1, a2), r00), _div0(_sqrt0(det_H), r00)
+
+
+def _sv2_parts(parts, g00, g01, g11, det_Gp):
+    """:func:`_sv2` from :func:`_block_parts` and ``Gp = P P^T`` given by its entries."""
+    det_H, r00, r01, r11 = parts
+    s00 = r00 * r00 * g00 + 2 * r00 * r01 * g01 + r01 * r01 * g11
+    s01 = r00 * r11 * g01 + r01 * r11 * g11
+    s11 = r11 * r11 * g11
+    l1 = 0.5 * (s00 + s11 + _sqrt0((s00 - s11) ** 2 + 4 * s01 * s01))
+    l2 = jnp.minimum(_div0(det_H * det_Gp, l1), l1)
+    return _sqrt0(l1), _sqrt0(l2)
+
+
+def _zonogon_vertices_cols(g0, g1):
+    """:func:`zonogon_vertices` on generators given as two lists of n scalars; the 2n vertices as
+    ``(x, y)`` pairs, ``+`` vertices first. Elementwise, so that vmapped it fuses.
+
+    Each pair is tested once: ``parallel`` and ``sign(g_j . g_k)`` are symmetric and, outside the
+    parallel band (``|C| > 1e3 eps |g_j||g_k|``, far above its rounding error), ``sign(C)`` is
+    antisymmetric whatever the compiler does with FMAs; inside it the sign is not used. ``g_j`` with
+    itself is always parallel (side 0, edge 1).
+    """
+    n = len(g0)
+    nrm = [jnp.sqrt(jax.lax.stop_gradient(g0[j] * g0[j] + g1[j] * g1[j])) for j in range(n)]
+    tol = PARALLEL_TOL * eps_of(g0[0])
+    coef = [[None] * n for _ in range(n)]  # (side, edge) of generator k at vertex j
+    for j in range(n):
+        coef[j][j] = (0.0, 1.0)
+        for k in range(j + 1, n):
+            C = g0[j] * g1[k] - g1[j] * g0[k]
+            parallel = jnp.abs(C) <= tol * nrm[j] * nrm[k]
+            side = jnp.where(parallel, 0.0, jnp.sign(C))
+            edge = jnp.where(parallel, jnp.sign(g0[j] * g0[k] + g1[j] * g1[k]), 0.0)
+            coef[j][k], coef[k][j] = (side, edge), (-side, edge)
+    plus, minus = [], []
+    for j in range(n):
+        px = py = mx = my = 0.0
+        for k in range(n):
+            side, edge = coef[j][k]
+            px, py = px + (side + edge) * g0[k], py + (side + edge) * g1[k]
+            mx, my = mx + (side - edge) * g0[k], my + (side - edge) * g1[k]
+        plus.append((px, py))
+        minus.append((mx, my))
+    return plus + minus
+
+
+def _measures(Jx, blocks, a, b, dq, n_wires):
+    """Every measure of :func:`pose_measures` from :func:`_pose_inputs` (masked columns ``a``, ``b``)
+    and the two blocks' :func:`_block_parts`."""
+    P0, P1 = pinv_tall2_cols(a, b)  # rows of P (2, n); zero columns for slack wires
+    n = len(P0)
+    kept = keep(P0 + P1)  # shared by the 8 outputs below: computed once
+    P0, P1 = kept[:n], kept[n:]
+    # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
+    # exactly 0); exactly 0 with one non-zero column (one taut wire)
+    det_Gp = sum((P0[j] * P1[k] - P1[j] * P0[k]) ** 2 for j in range(n) for k in range(j + 1, n))
+    g00 = sum(x * x for x in P0)
+    g01 = sum(x * y for x, y in zip(P0, P1))
+    g11 = sum(y * y for y in P1)
+    rtol = max(3, n_wires) * eps_of(Jx)
+    out = {}
+    for part, parts in zip("vw", blocks):
+        s1, s2 = _sv2_parts(parts, g00, g01, g11, det_Gp)
+        out[f"kci_{part}"] = _div0(s2, s1)
+        out[f"sigma_min_{part}"] = s2
+        out[f"sigma_min_nz_{part}"] = jnp.where(s2 > rtol * s1, s2, s1)
+    # Paper Eqs. 17-19 without the 3^n columns: the box maps to the zonogon P dq [-1, 1]^n in the
+    # configuration space; a norm of J_xpsi z is convex in z, so its maximum is at a vertex.
+    dq = jnp.asarray(dq, P0[0].dtype)
+    V = _zonogon_vertices_cols([x * dq for x in P0], [y * dq for y in P1])
+    sq = [[0.0, 0.0] for _ in V]  # |dx[:3]|^2, |dx[3:]|^2 per vertex, dx = Jx v
+    for i, (v0, v1) in enumerate(V):
+        dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
+        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2], dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
+    # sqrt is monotonic and correctly rounded: sqrt(max) == max(sqrt), one root instead of 2n
+    out["dp_max"] = _sqrt0(functools.reduce(jnp.maximum, [q[0] for q in sq]))
+    out["dw_max"] = _sqrt0(functools.reduce(jnp.maximum, [q[1] for q in sq]))
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -147,28 +244,16 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         ``dp_max`` (mm), ``dw_max`` (rad): the largest ``||dx[:3]||`` and ``||dx[3:]||`` with
         ``dx = J_xpsi pinv(J~_qpsi) dq_vec`` over the box (paper Eqs. 17-19), exact.
     """
-    Jx, Jq = _masked_Jq(design, theta_L, delta, mask)
-    P = pinv_tall2(Jq)  # (2, n); zero columns for slack wires
-    # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
-    # exactly 0); exactly 0 with one non-zero column (one taut wire)
-    upper = np.triu(np.ones((design.n_wires,) * 2, bool), k=1)
-    det_Gp = jnp.sum(jnp.where(upper, _column_cross(P), 0.0) ** 2)
-    Gp = jnp.array([[jnp.sum(P[0] * P[0]), jnp.sum(P[0] * P[1])],
-                    [jnp.sum(P[0] * P[1]), jnp.sum(P[1] * P[1])]])
-    rtol = max(3, design.n_wires) * eps_of(Jx)
-    out = {}
-    for part, A in (("v", Jx[:3]), ("w", Jx[3:])):
-        s1, s2 = _sv2(A, Gp, det_Gp)
-        out[f"kci_{part}"] = _div0(s2, s1)
-        out[f"sigma_min_{part}"] = s2
-        out[f"sigma_min_nz_{part}"] = jnp.where(s2 > rtol * s1, s2, s1)
-    # Paper Eqs. 17-19 without the 3^n columns: the box maps to the zonogon P dq [-1, 1]^n in the
-    # configuration space; a norm of J_xpsi z is convex in z, so its maximum is at a vertex.
-    V = zonogon_vertices(P * jnp.asarray(dq, P.dtype))  # (2n, 2)
-    dX = V[:, :1] * Jx[:, 0] + V[:, 1:] * Jx[:, 1]  # (2n, 6) = V @ Jx.T, elementwise (vmap-fast)
-    out["dp_max"] = jnp.max(_norm0(dX[:, :3]))
-    out["dw_max"] = jnp.max(_norm0(dX[:, 3:]))
-    return out
+    Jx, a, b, _ = _pose_inputs(design, theta_L, delta)
+    if mask is not None:
+        mask = jnp.asarray(mask, Jx.dtype)
+        if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
+            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
+                             f"got {mask.shape}")
+        a = [x * mask[k] for k, x in enumerate(a)]
+        b = [y * mask[k] for k, y in enumerate(b)]
+    blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
+    return _measures(Jx, blocks, a, b, dq, design.n_wires)
 
 
 def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
@@ -178,9 +263,12 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     ``n_taut`` is the number of wires in tension (MODEL.md Sec. 2, boundary rule included). The
     reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`.
     """
-    mask = tension_mask(design, delta)
+    Jx, a, b, score = _pose_inputs(design, theta_L, delta)  # shared by both modes
+    mask = mask_from_score(jnp.stack(score))
     out = {"n_taut": jnp.sum(mask > 0.5).astype(jnp.int32)}
-    for mode, m in (("full", None), ("reduced", mask)):
-        for k, v in pose_measures(design, theta_L, delta, dq, m).items():
+    blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
+    reduced = ([x * mask[k] for k, x in enumerate(a)], [y * mask[k] for k, y in enumerate(b)])
+    for mode, (aa, bb) in (("full", (a, b)), ("reduced", reduced)):
+        for k, v in _measures(Jx, blocks, aa, bb, dq, design.n_wires).items():
             out[f"{k}_{mode}"] = v
     return out

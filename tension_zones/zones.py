@@ -56,7 +56,11 @@ def tension_mask(design: Design, delta, theta_L=None, psi_dot=None, temperature=
     Backward: the gradient of ``sigmoid(score / temperature)``, so design variables that move a
     wire across its zone boundary (wire angles, the bending direction) get a useful gradient.
     """
-    score = tension_score(design, delta, theta_L, psi_dot)
+    return mask_from_score(tension_score(design, delta, theta_L, psi_dot), temperature)
+
+
+def mask_from_score(score, temperature=TEMPERATURE):
+    """:func:`tension_mask` from a :func:`tension_score` the caller already has."""
     return straight_through(score > BOUNDARY_TOL, jax.nn.sigmoid(score / temperature))
 
 
