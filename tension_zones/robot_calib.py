@@ -106,6 +106,12 @@ def describe(res: rf.FitResult) -> dict:
     return out
 
 
+def params_from_report(report: dict) -> dict:
+    """The final model's parameters (model units, for ``robot_fit.predict``) from a report."""
+    return {k: np.asarray(d["value"]) * (np.pi / 180.0 if d["unit"] == "deg" else 1.0)
+            for k, d in report["parameters"].items()}
+
+
 def _effect_params(res: rf.FitResult, effect: str, robot: Robot) -> dict:
     names = rf._effect_params(robot)[effect]
     d = describe(res)

@@ -11,7 +11,7 @@ from tension_zones import multisegment as ms
 from tension_zones import robot_calib as rc
 from tension_zones import robot_fit as rf
 from tension_zones.cli import main
-from tension_zones.opencr import OpenCRData
+from tension_zones.opencr import OpenCRData, read_opencr
 
 # another robot of the same family: two segments of other lengths, pitch radii, wire counts,
 # angles and stiffness than the FTDCR v4
@@ -102,6 +102,10 @@ def test_another_robot_of_the_family_calibrates_with_only_its_design_file(family
         err = np.abs(np.asarray(p["value"]) - v * scale)
         assert np.all(err < 5 * np.asarray(p["std"]) + 1e-9), (k, p, v)
         assert not any(p["at_bound"])
+    # the report's parameters reproduce its validation error
+    va = read_opencr(family / "val.csv", servo_ids=tuple(SERVOS))
+    pv = rf.predict(ms.Robot.from_dict(DESIGN), rc.params_from_report(rep), va.q)
+    assert abs(rf.rmse(pv, va.p) - rep["rmse_validate_mm"]) < 1e-6
     assert rep["noise_floor_mm"] is None and "not estimated" in rep["noise"]["method"]
     assert "| + pretension |" in (out / "report.md").read_text()
     assert (out / rc.PLOT).stat().st_size > 10_000
