@@ -31,10 +31,10 @@ CANDIDATES = ["tendon_angles", "pretension", "slack", "hysteresis", "stiffness",
 
 def baselines(tr, va):
     """KNN and polynomial ridge on the commanded displacements; hyper-parameters by group holdout."""
+    from sklearn.linear_model import Ridge
     from sklearn.neighbors import KNeighborsRegressor
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import PolynomialFeatures, StandardScaler
-    from sklearn.linear_model import Ridge
 
     fit_idx, held_idx = rf.group_holdout(tr.patterns)
     models = {
@@ -73,7 +73,7 @@ def main(argv=None):
 
     base = baselines(tr, va)
     a0 = rf.initial_segment_angles(robot, tr.q, tr.p, tr.labels)
-    kept, hist = rf.forward_selection(robot, tr.q, tr.p, tr.patterns, args.effects.split(","),
+    _, hist = rf.forward_selection(robot, tr.q, tr.p, tr.patterns, args.effects.split(","),
                                       init={"segment_angle": a0}, verbose=True)
 
     # refit every accepted model on all of train.csv, then evaluate once on val.csv

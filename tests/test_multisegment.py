@@ -47,7 +47,7 @@ def test_single_segment_kinematics_identical(b):
     np.testing.assert_array_equal(R, R1)
     np.testing.assert_array_equal(ms.J_qB(rob), tz.J_qb(d))
     np.testing.assert_allclose(ms.J_xB(rob, B), tz.J_xb(d, b), rtol=0, atol=1e-14)
-    theta, delta = tz.b_to_psi(jnp.asarray(b))
+    _, delta = tz.b_to_psi(jnp.asarray(b))
     np.testing.assert_allclose(ms.tension_score(rob, B), tz.tension_score(d, delta), atol=1e-15)
     np.testing.assert_array_equal(ms.tension_mask(rob, B), tz.tension_mask(d, delta))
 
