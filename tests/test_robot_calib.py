@@ -27,7 +27,7 @@ TRUTH = {"segment_angle": np.radians([12.0, -20.0]), "offset": np.array([1.5, -2
 NOISE = 0.05
 
 
-def _patterns(robot, rng, val=False):
+def _patterns(robot, rng, val=False, servos=SERVOS):
     """(label, Q block) pairs: single-tendon pulls and per-segment sweeps (train), or all segments
     moving together (val); commands in MODEL.md's sign (negative = pulled in)."""
     Jq = np.asarray(ms.J_qB(robot))
@@ -37,7 +37,7 @@ def _patterns(robot, rng, val=False):
         for k in range(robot.n_wires):
             q = np.full((8, robot.n_wires), 1.0)  # the others paid out (slack), as the lab does
             q[:, k] = -np.linspace(0.0, 2.0, 8)
-            out.append((f"rep1_tendon{k}_id{SERVOS[k]}_pull", q))
+            out.append((f"rep1_tendon{k}_id{servos[k]}_pull", q))
     t = np.linspace(0.0, 1.0, 8)[:, None]
     for d in range(0, 360, 60):
         for j in ([None] if val else range(S)):
@@ -50,12 +50,12 @@ def _patterns(robot, rng, val=False):
     return out
 
 
-def _write(path, robot, pats, rng, servo_order):
+def _write(path, robot, pats, rng, servo_order, servos=SERVOS, truth=TRUTH):
     Q = np.concatenate([q for _, q in pats])
     labels = [lab for lab, q in pats for _ in range(len(q))]
-    truth = {k: jnp.asarray(v) for k, v in TRUTH.items()}
+    truth = {k: jnp.asarray(v) for k, v in truth.items()}
     P = np.asarray(rf.predict(robot, truth, Q)) + NOISE * rng.normal(size=(len(Q), 3))
-    cols = [SERVOS.index(s) for s in servo_order]  # file columns in servo order, not tendon order
+    cols = [servos.index(s) for s in servo_order]  # file columns in servo order, not tendon order
     lines = ["timestamp,pattern_label," + ",".join(f"servo_{s}_mm" for s in servo_order) + ",tip_x,tip_y,tip_z"]
     for i, (lab, q, p) in enumerate(zip(labels, Q, P)):
         vals = [-q[c] for c in cols] + list(p)  # the lab's sign: positive = pulled in
@@ -167,3 +167,19 @@ def test_missing_column_in_validation_file(family, capsys, tmp_path):
                  "--validate", tmp_path / "v.csv", "--out", tmp_path / "o"]) == 2
     err = capsys.readouterr().err
     assert "missing column 'servo_2_mm'" in err and err.count("\n") == 1
+
+
+def test_single_segment_design_file_works_with_opencr(tmp_path, capsys):
+    seg = DESIGN["segments"][1]
+    (tmp_path / "one.json").write_text(json.dumps(seg))  # a plain single-segment design file
+    robot = ms.Robot.from_dict(seg)
+    servos = [3, 1, 4, 2]
+    truth = {"segment_angle": np.radians([-30.0]), "offset": np.array([0.5, 0.0, -1.0])}
+    rng = np.random.default_rng(2)
+    _write(tmp_path / "t.csv", robot, _patterns(robot, rng, servos=servos), rng, [1, 2, 3, 4], servos, truth)
+    assert main(["calibrate", str(tmp_path / "t.csv"), "--format", "opencr", "--design",
+                 str(tmp_path / "one.json"), "--out", str(tmp_path / "o"), "--effects", "pretension", "--quiet"]) == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["rmse_before_mm"] < 2.5 * NOISE * np.sqrt(3)  # the base fit is already at the noise
+    assert abs(rep["parameters"]["segment_angle"]["value"][0] + 30.0) < 0.5
+    assert "rmse_validate_mm" not in rep and rep["plots"] == []
