@@ -180,7 +180,7 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
     held = lambda pred: rf.rmse(pred[held_idx], P[held_idx])  # noqa: E731
     rmse_declared = held(np.asarray(rf.predict(robot, zero, Q)))
     say(f"declared design: held-out {rmse_declared:.3f} mm; trying {', '.join(candidates)}")
-    kept, hist = rf.forward_selection(robot, Q, P, train.patterns, list(candidates), min_gain=min_gain,
+    _, hist = rf.forward_selection(robot, Q, P, train.patterns, list(candidates), min_gain=min_gain,
                                       init={"segment_angle": a0}, verbose=log is not None)
 
     def on_val(res):
@@ -216,7 +216,7 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
     unexplained, st = structure(resid, pred_tr[held_idx], noise, best)
     v, va, pv = on_val(final)
     report = {
-        "n_samples": len(train), "n_train": int(len(fit_idx)), "n_held_out": int(len(held_idx)),
+        "n_samples": len(train), "n_train": len(fit_idx), "n_held_out": len(held_idx),
         "holdout": "every 4th pattern group of the training file (in order of first appearance, "
                    "from the 4th); the validation file is only evaluated on",
         "held_out_groups": sorted(set(np.asarray(train.patterns, dtype=object)[held_idx])),
@@ -328,8 +328,8 @@ def markdown(report: dict) -> str:
             lines.append(f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
                          f"{_f(b['rmse_validate_aligned_mm'])} |")
         lines.append("")
-    lines += ["## Effects tried (score = held-out RMSE drop, mm; kept above "
-              f"{100 * report['min_gain']:.0f} %)", ""]
+    lines += [("## Effects tried (score = held-out RMSE drop, mm; kept above "
+               f"{100 * report['min_gain']:.0f} %)"), ""]
     for rd in report["rounds"]:
         sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
         lines.append(f"- pass {rd['round']}: " + ", ".join(
