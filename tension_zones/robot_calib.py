@@ -51,7 +51,8 @@ def noise_floor(data: OpenCRData) -> dict:
     same = np.all(np.abs(np.diff(data.q, axis=0)) < 1e-9, axis=1)
     if same.sum() < 10:
         return {"floor_mm": None, "sigma_mm": None, "pairs": int(same.sum()),
-                "method": f"not estimated: only {int(same.sum())} consecutive repeated commands (< 10)"}
+                "method": f"not estimated: {int(same.sum())} pairs of consecutive samples with the same "
+                          "command (10 needed), so tracker noise cannot be told from model error"}
     d = np.diff(data.p, axis=0)[same] / math.sqrt(2.0)
     mad = 1.4826 * np.median(np.abs(d), axis=0)
     keep = np.all(np.abs(d) <= GLITCH_SIGMAS * np.maximum(mad, 1e-12), axis=1)
@@ -104,6 +105,37 @@ def describe(res: rf.FitResult) -> dict:
         out[k] = {"value": (v * s).tolist(), "std": (np.ravel(res.std[k]) * s).tolist(), "unit": unit,
                   "lo": b.lo * s, "hi": b.hi * s, "at_bound": at.tolist()}
     return out
+
+
+def correlations(robot: Robot, res: rf.FitResult, Q, P, idx, top: int = 5) -> dict:
+    """Identifiability: parameter correlations from the Gauss-Newton covariance ``(J'J)^-1`` (``J``
+    the Jacobian of the fitted positions in physical parameters). ``max_abs`` near 1 means a pair
+    trades off freely; ``pairs`` are the ``top`` largest ``|corr|`` with their parameter names."""
+    import jax
+    import jax.numpy as jnp
+
+    names = [f"{k}[{i}]" for k, v in res.params.items() for i in range(np.size(v))]
+    shapes = {k: np.shape(v) for k, v in res.params.items()}
+    x0 = np.concatenate([np.ravel(v) for v in res.params.values()])
+
+    def unflat(x):
+        out, i = {}, 0
+        for k, sh in shapes.items():
+            n = int(np.prod(sh))
+            out[k] = x[i:i + n].reshape(sh)
+            i += n
+        return out
+
+    Qj, ix = jnp.asarray(Q, float), np.asarray(idx)
+    J = np.asarray(jax.jacfwd(lambda x: rf.predict(robot, unflat(x), Qj)[ix].ravel())(jnp.asarray(x0)))
+    A = J.T @ J
+    cov = np.linalg.pinv(A + 1e-14 * np.trace(A) / len(A) * np.eye(len(A)))
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    C = cov / np.outer(d, d)
+    iu = np.triu_indices(len(C), 1)
+    order = np.argsort(-np.abs(C[iu]))[:top]
+    pairs = [{"a": names[iu[0][o]], "b": names[iu[1][o]], "corr": float(C[iu][o])} for o in order]
+    return {"max_abs": float(np.abs(C[iu]).max()) if len(iu[0]) else 0.0, "pairs": pairs}
 
 
 def params_from_report(report: dict) -> dict:
@@ -214,6 +246,8 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
     noise = noise_floor(train)
     resid = P[held_idx] - pred_tr[held_idx]
     unexplained, st = structure(resid, pred_tr[held_idx], noise, best)
+    say("parameter correlations of the final model")
+    corr = correlations(robot, final, Q, P, fit_idx)
     v, va, pv = on_val(final)
     report = {
         "n_samples": len(train), "n_train": len(fit_idx), "n_held_out": len(held_idx),
@@ -233,6 +267,7 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
         "unexplained_structure": unexplained,
         "structure": st,
         "parameters": describe(final),
+        "correlations": corr,
         "initial_segment_angle_deg": np.degrees(a0).tolist(),
         "steps": steps,
     }
@@ -340,6 +375,9 @@ def markdown(report: dict) -> str:
     for k, d in report["parameters"].items():
         flag = " **at a bound**" if any(d["at_bound"]) else ""
         lines.append(f"| {k} | {_vals(d['value'], d['std'], d['unit'])}{flag} | [{d['lo']:.3g}, {d['hi']:.3g}] |")
+    c = report["correlations"]
+    lines += ["", f"Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
+              + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + "."]
     lines += ["", f"Unexplained structure left in the held-out residual: "
               f"**{'yes' if report['unexplained_structure'] else 'no'}** "
               f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor): "

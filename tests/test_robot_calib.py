@@ -106,6 +106,7 @@ def test_another_robot_of_the_family_calibrates_with_only_its_design_file(family
     va = read_opencr(family / "val.csv", servo_ids=tuple(SERVOS))
     pv = rf.predict(ms.Robot.from_dict(DESIGN), rc.params_from_report(rep), va.q)
     assert abs(rf.rmse(pv, va.p) - rep["rmse_validate_mm"]) < 1e-6
+    assert rep["correlations"]["max_abs"] < 0.99  # identifiable: no pair trades off freely
     assert rep["noise_floor_mm"] is None and "not estimated" in rep["noise"]["method"]
     assert "| + pretension |" in (out / "report.md").read_text()
     assert (out / rc.PLOT).stat().st_size > 10_000
@@ -183,3 +184,16 @@ def test_single_segment_design_file_works_with_opencr(tmp_path, capsys):
     assert rep["rmse_before_mm"] < 2.5 * NOISE * np.sqrt(3)  # the base fit is already at the noise
     assert abs(rep["parameters"]["segment_angle"]["value"][0] + 30.0) < 0.5
     assert "rmse_validate_mm" not in rep and rep["plots"] == []
+
+
+
+def test_correlations_flag_a_pair_that_trades_off():
+    """With the robot straight, a marker offset along the tip axis and the base offset along z move
+    the measured point identically: the pair must show |corr| = 1; the lateral ones are separate."""
+    robot = ms.Robot.from_dict(DESIGN["segments"][0])
+    params = {"segment_angle": np.zeros(1), "offset": np.zeros(3), "marker": np.zeros(3)}
+    res = rf.FitResult((), params, {}, 0.0, 0, {})
+    c = rc.correlations(robot, res, np.zeros((4, 3)), None, np.arange(4), top=3)
+    assert c["max_abs"] > 0.999
+    assert {c["pairs"][0]["a"], c["pairs"][0]["b"]} <= {"offset[0]", "offset[1]", "offset[2]", "marker[0]",
+                                                        "marker[1]", "marker[2]"}
