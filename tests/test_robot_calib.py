@@ -179,9 +179,10 @@ def test_single_segment_design_file_works_with_opencr(tmp_path, capsys):
     rng = np.random.default_rng(2)
     _write(tmp_path / "t.csv", robot, _patterns(robot, rng, servos=servos), rng, [1, 2, 3, 4], servos, truth)
     assert main(["calibrate", str(tmp_path / "t.csv"), "--format", "opencr", "--design",
-                 str(tmp_path / "one.json"), "--out", str(tmp_path / "o"), "--effects", "pretension", "--quiet"]) == 0
+                 str(tmp_path / "one.json"), "--out", str(tmp_path / "o"), "--effects", "", "--quiet"]) == 0
     rep = json.loads((tmp_path / "o" / "report.json").read_text())
-    assert rep["rmse_before_mm"] < 2.5 * NOISE * np.sqrt(3)  # the base fit is already at the noise
+    assert rep["effects"] == rep["candidates"] == []  # --effects "": the base fit alone
+    assert rep["rmse_after_mm"] == rep["rmse_before_mm"] < 2.5 * NOISE * np.sqrt(3)
     assert abs(rep["parameters"]["segment_angle"]["value"][0] + 30.0) < 0.5
     assert "rmse_validate_mm" not in rep and rep["plots"] == []
 
