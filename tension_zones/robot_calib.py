@@ -28,7 +28,7 @@ from .multisegment import Robot
 from .opencr import OpenCRData
 
 #: Candidate effects, in the order they are tried (gravity last: its equilibrium needs the Hessian
-#: of the chained pose, slow to compile). Fixed before any look at the data.
+#: of the chained pose, slow to compile): the order of ``benchmarks/ftdcr_v4.py``.
 CANDIDATES = ("tendon_angles", "pretension", "slack", "hysteresis", "stiffness", "registration",
               "geometry", "gravity")
 #: Relative held-out RMSE drop an effect must bring to be kept.
@@ -213,7 +213,7 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
     rmse_declared = held(np.asarray(rf.predict(robot, zero, Q)))
     say(f"declared design: held-out {rmse_declared:.3f} mm; trying {', '.join(candidates)}")
     _, hist = rf.forward_selection(robot, Q, P, train.patterns, list(candidates), min_gain=min_gain,
-                                      init={"segment_angle": a0}, verbose=log is not None)
+                                   init={"segment_angle": a0}, verbose=log is not None)
 
     def on_val(res):
         if val is None:
@@ -222,8 +222,9 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
         return rf.rmse(pv, val.p), rf.rmse_aligned(pv, val.p), pv
 
     base = hist[0]
-    steps = [{"name": "base", "rmse_held_out_mm": base["rmse_holdout_mm"],
-              **dict(zip(("rmse_validate_mm", "rmse_validate_aligned_mm"), on_val(base["fit"])[:2]))}]
+    last = on_val(base["fit"])  # (rmse, aligned, predicted) of the model of the moment on val
+    steps = [{"name": "base", "rmse_held_out_mm": base["rmse_holdout_mm"], "rmse_validate_mm": last[0],
+              "rmse_validate_aligned_mm": last[1]}]
     effects, candidates_out, rounds = [], [], []
     best, final = base["rmse_holdout_mm"], base["fit"]
     for rnd, rows in enumerate(_rounds(hist, candidates), start=1):
@@ -234,7 +235,8 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
             tried.append({"name": r["effect"], "rmse_held_out_mm": r["rmse_holdout_mm"], "kept": r["kept"]})
             if r["kept"]:
                 best, final = r["rmse_holdout_mm"], r["fit"]
-                v, va, _ = on_val(final)
+                last = on_val(final)
+                v, va = last[:2]
                 vals, stds = _effect_params(final, r["effect"], robot)
                 effects.append({"name": r["effect"], "params": vals, "params_std": stds,
                                 "rmse_after_mm": best, "rmse_validate_mm": v,
@@ -248,7 +250,7 @@ def calibrate_robot(robot: Robot, train: OpenCRData, val: OpenCRData | None = No
     unexplained, st = structure(resid, pred_tr[held_idx], noise, best)
     say("parameter correlations of the final model")
     corr = correlations(robot, final, Q, P, fit_idx)
-    v, va, pv = on_val(final)
+    v, va, pv = last
     report = {
         "n_samples": len(train), "n_train": len(fit_idx), "n_held_out": len(held_idx),
         "holdout": "every 4th pattern group of the training file (in order of first appearance, "
