@@ -211,20 +211,23 @@ def _add_sweep_parser(sub) -> None:
 # ---- end sweep (issue 3) -----------------------------------------------------------------------
 
 
-# ---- calibrate (issue 6) ----------------------------------------------------------------------
+# ---- calibrate (issue 6; --format opencr: issue 8) --------------------------------------------
 def cmd_calibrate(args) -> None:
+    if args.format == "opencr":
+        return _calibrate_opencr(args)
     from .calib import DataError, calibrate, load_csv, write_report
     from .design import Design
 
+    if args.validate is not None or args.effects is not None:
+        raise CLIError("--validate and --effects go with --format opencr")
     try:
         design = Design.from_json(args.design)
         data = load_csv(args.data, n_wires=design.n_wires, length=float(design.length),
                         drop_bad=args.drop_bad)
-        out = Path(args.out)
-        if out.exists() and not out.is_dir():
-            raise CLIError(f"--out must be a folder, {str(out)!r} is a file")
+        out = _out_dir(args.out)
         log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
-        res = calibrate(data, design, holdout=args.holdout, robust=args.robust, log=log)
+        res = calibrate(data, design, holdout=0.25 if args.holdout is None else args.holdout,
+                        robust=args.robust, log=log)
     except DataError as e:
         raise CLIError(str(e)) from None
     report = write_report(res, out)
@@ -238,16 +241,70 @@ def cmd_calibrate(args) -> None:
         print(f"wrote {out / 'report.json'}, {out / 'report.md'} and {len(report['plots'])} plots")
 
 
+def _out_dir(path: str) -> Path:
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out must be a folder, {str(out)!r} is a file")
+    return out
+
+
+def _calibrate_opencr(args) -> None:
+    """A multi-segment robot from OpenCR recordings (``tension_zones.robot_calib``)."""
+    from .multisegment import Robot
+    from .opencr import read_opencr
+    from .robot_calib import CANDIDATES, calibrate_robot, write_report
+    from .robot_fit import effect_names
+
+    for flag, given in (("--holdout", args.holdout is not None), ("--robust", args.robust),
+                        ("--drop-bad", args.drop_bad)):
+        if given:
+            raise CLIError(f"{flag} goes with --format model (opencr holds out every 4th pattern group "
+                           "of the training file, and bad rows are errors)")
+    robot = Robot.from_json(args.design)
+    cands = CANDIDATES if args.effects is None else tuple(e.strip() for e in args.effects.split(",")
+                                                          if e.strip())
+    unknown = [e for e in cands if e not in effect_names(robot) or e == "base"]
+    if unknown:
+        known = [e for e in effect_names(robot) if e != "base"]
+        raise CLIError(f"--effects: unknown effect {unknown[0]!r}; known: {', '.join(known)}")
+    train = read_opencr(args.data, n_wires=robot.n_wires)
+    val = None if args.validate is None else read_opencr(args.validate, servo_ids=train.servo_ids,
+                                                        n_wires=robot.n_wires)
+    out = _out_dir(args.out)
+    log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
+    report = calibrate_robot(robot, train, val, candidates=cands, log=log)
+    report.update(data=str(args.data), validate=args.validate, design=str(args.design))
+    report = write_report(report, out)
+    found = ", ".join(e["name"] for e in report["effects"]) or "none"
+    line = (f"held-out train RMSE: declared {report['rmse_declared_mm']:.2f} mm, base fit "
+            f"{report['rmse_before_mm']:.2f} mm, after {report['rmse_after_mm']:.2f} mm; effects added: {found}")
+    if val is not None:
+        line += (f"; validate RMSE {report['rmse_validate_mm']:.2f} mm, mean offset removed "
+                 f"{report['rmse_validate_aligned_mm']:.2f} mm")
+        for k, b in (report.get("baselines") or {}).items():
+            line += f"; {k} baseline {b['rmse_validate_mm']:.2f} mm"
+    print(line)
+    if not args.quiet:
+        print(f"wrote {out / 'report.json'}, {out / 'report.md'}" +
+              (f" and {report['plots'][0]}" if report["plots"] else ""))
+
+
 def _add_calibrate_parser(sub) -> None:
     c = sub.add_parser("calibrate", help="fit a design to tracker data, find and add missing effects")
-    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6)")
-    c.add_argument("--design", required=True, help="declared design JSON")
+    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6, or the OpenCR format)")
+    c.add_argument("--design", required=True,
+                   help="declared design JSON (one segment, or {\"segments\": [...]} with --format opencr)")
     c.add_argument("--out", required=True, help="output folder (report.json, report.md, plots)")
-    c.add_argument("--holdout", type=float, default=0.25,
-                   help="fraction held out at the end of the acquisition order (default 0.25)")
-    c.add_argument("--robust", action="store_true", help="Huber loss (tracker glitches)")
+    c.add_argument("--format", choices=("model", "opencr"), default="model",
+                   help="model: MODEL.md Sec. 6 (default); opencr: the OpenCR lab's servo_<id>_mm columns")
+    c.add_argument("--validate", help="(opencr) a second recording, only evaluated on")
+    c.add_argument("--effects", help="(opencr) candidate effects in the order tried, comma-separated "
+                                     "(default: every effect of robot_fit, gravity last)")
+    c.add_argument("--holdout", type=float, default=None,
+                   help="(model) fraction held out at the end of the acquisition order (default 0.25)")
+    c.add_argument("--robust", action="store_true", help="(model) Huber loss (tracker glitches)")
     c.add_argument("--drop-bad", action="store_true",
-                   help="drop isolated bad rows (counted in the report) instead of failing")
+                   help="(model) drop isolated bad rows (counted in the report) instead of failing")
     c.add_argument("--quiet", action="store_true", help="only the one-line summary")
     c.set_defaults(func=cmd_calibrate)
 # ---- end calibrate ----------------------------------------------------------------------------
