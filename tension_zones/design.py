@@ -173,14 +173,7 @@ class Design:
 
     @classmethod
     def from_json(cls, path) -> Design:
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"design file {str(path)!r} does not exist") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"design file {str(path)!r} is not valid JSON: {e}") from None
-        return cls.from_dict(d)
+        return cls.from_dict(read_json(path, "design file"))
 
     def __repr__(self) -> str:
         if not all(_is_concrete(getattr(self, f)) for f in _DATA_FIELDS):
@@ -198,6 +191,19 @@ class Design:
 
 
 jax.tree_util.register_pytree_node(Design, Design._tree_flatten, Design._tree_unflatten)
+
+
+def read_json(path, what: str):
+    """A JSON file's content; a missing or malformed file is a ValueError naming it (``what``)."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise ValueError(f"{what} {str(path)!r} does not exist") from None
+    except IsADirectoryError:
+        raise ValueError(f"{what} {str(path)!r} is a folder, not a file") from None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{what} {str(path)!r} is not valid JSON: {e}") from None
 
 
 def _check_scalar(name: str, value) -> None:

@@ -22,8 +22,6 @@ Solved per sample by a damped Newton method; derivatives by the implicit functio
 from __future__ import annotations
 
 import dataclasses
-import json
-from pathlib import Path
 from typing import Any
 
 import jax
@@ -31,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._numerics import pinv_tall2, straight_through
-from .design import Design
+from .design import Design, read_json
 from .kinematics import b_to_psi, tip_pose_b
 from .zones import BOUNDARY_TOL, TEMPERATURE
 
@@ -169,14 +167,7 @@ class Robot:
 
     @classmethod
     def from_json(cls, path) -> Robot:
-        path = Path(path)
-        try:
-            d = json.loads(path.read_text())
-        except FileNotFoundError:
-            raise ValueError(f"design file {str(path)!r} does not exist") from None
-        except json.JSONDecodeError as e:
-            raise ValueError(f"design file {str(path)!r} is not valid JSON: {e}") from None
-        return cls.from_dict(d)
+        return cls.from_dict(read_json(path, "design file"))
 
     def to_dict(self) -> dict[str, Any]:
         return {"segments": [s.to_dict() for s in self.segments]}

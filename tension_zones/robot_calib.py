@@ -378,7 +378,7 @@ def markdown(report: dict) -> str:
         flag = " **at a bound**" if any(d["at_bound"]) else ""
         lines.append(f"| {k} | {_vals(d['value'], d['std'], d['unit'])}{flag} | [{d['lo']:.3g}, {d['hi']:.3g}] |")
     c = report["correlations"]
-    lines += ["", f"Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
+    lines += ["", "Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
               + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + "."]
     lines += ["", f"Unexplained structure left in the held-out residual: "
               f"**{'yes' if report['unexplained_structure'] else 'no'}** "

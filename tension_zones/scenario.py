@@ -8,14 +8,12 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import json
 import math
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .design import DEFAULT_BACKBONE_EI
+from .design import DEFAULT_BACKBONE_EI, read_json
 
 #: Every scenario key, its default and its meaning (the README's table is generated from this).
 DEFAULTS: dict[str, Any] = {
@@ -238,11 +236,4 @@ def parse_scenario(d: dict) -> Scenario:
 
 
 def load_scenario(path) -> Scenario:
-    path = Path(path)
-    try:
-        d = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise ValueError(f"scenario file {str(path)!r} does not exist") from None
-    except json.JSONDecodeError as e:
-        raise ValueError(f"scenario file {str(path)!r} is not valid JSON: {e}") from None
-    return parse_scenario(d)
+    return parse_scenario(read_json(path, "scenario file"))
