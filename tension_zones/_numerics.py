@@ -137,27 +137,15 @@ def pinv_tall2(J):
     ``pinv(G) = G / tr(G)^2``; rank 0 gives zeros. Both branches are guarded (double ``where``).
     """
     n = J.shape[0]
-    G = J.T @ J
-    i, j = jnp.triu_indices(n, k=1)
-    minors = J[i, 0] * J[j, 1] - J[i, 1] * J[j, 0]
-    det = jnp.sum(minors**2)
-    tr = G[0, 0] + G[1, 1]
-    rcond = max(n, 2) * eps_of(J)
-    rank2 = det > (rcond * tr) ** 2
-    rank_pos = tr > 0
-    det_safe = jnp.where(rank2, det, 1.0)
-    tr_safe = jnp.where(rank_pos, tr, 1.0)
-    adj = jnp.array([[G[1, 1], -G[0, 1]], [-G[1, 0], G[0, 0]]])
-    G_pinv = jnp.where(
-        rank2, adj / det_safe, jnp.where(rank_pos, G / tr_safe**2, jnp.zeros_like(G))
-    )
-    return G_pinv @ J.T
+    r0, r1 = pinv_tall2_cols([J[k, 0] for k in range(n)], [J[k, 1] for k in range(n)])
+    return jnp.stack([jnp.stack(r0), jnp.stack(r1)])
 
 
 def pinv_tall2_cols(a, b):
-    """:func:`pinv_tall2` with the matrix given by its two columns ``a``, ``b`` as lists of ``n`` scalars.
+    """The pseudo-inverse of :func:`pinv_tall2` (its one implementation), the matrix given by its two
+    columns ``a``, ``b`` as lists of ``n`` scalars.
 
-    Returns the rows of the (2, n) pseudo-inverse as two lists. The same formulas written elementwise:
+    Returns the rows of the (2, n) pseudo-inverse as two lists. Written elementwise:
     vmapped over poses these are plain (N,) arrays that XLA fuses, where the matrix form becomes
     tiny batched matmuls and ``triu_indices`` gathers.
     """
