@@ -14,7 +14,16 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._numerics import cubic_sq, float_dtype, pinv_tall2, rotvec_to_matrix, sinc_sq, versinc_sq
+from ._numerics import (
+    cubic_sq,
+    float_dtype,
+    pinv_tall2,
+    rotvec_to_matrix,
+    sinc_comp_sq,
+    sinc_sq,
+    versinc_sq,
+    with_derivatives,
+)
 from .design import Design
 
 THETA_0 = jnp.pi / 2
@@ -171,17 +180,45 @@ def J_qb(design: Design, b=None):
     return -design.pitch_radius * jnp.stack([jnp.cos(a), jnp.sin(a)], axis=1)
 
 
-def J_xb(design: Design, b):
-    """Twist Jacobian in bending-vector coordinates, (6, 2): ``[p_dot; omega] = J_xb b_dot``."""
-    (b,) = _as_float(design, b)
+def bend_coeffs(x2, second=False):
+    """Scalar coefficients of the tip pose and its Jacobian in ``b``, as functions of ``x2 = |b|^2``.
 
-    p_of = lambda bb: tip_pose_b(design, bb)[0]  # noqa: E731
-    R_of = lambda bb: tip_pose_b(design, bb)[1]  # noqa: E731
-    dp = jax.jacfwd(p_of)(b)  # (3, 2)
-    dR = jax.jacfwd(R_of)(b)  # (3, 3, 2)
-    W = jnp.einsum("ijk,lj->kil", dR, R_of(b))  # R_dot R^T per column, (2, 3, 3)
-    omega = jnp.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=0)  # (3, 2)
-    return jnp.concatenate([dp, omega], axis=0)
+    Returns ``(c, c', s', g)`` -- or with ``second=True`` ``(c, c', c'', s', s'', g, g')`` -- where
+    ``c = (1 - cos phi)/phi^2``, ``s = sin(phi)/phi``, ``g = (phi - sin phi)/phi^3`` and ``'`` is
+    ``d/d x2``; series near ``x2 = 0`` (finite values and gradients at the straight pose).
+    """
+    if not second:
+        c, c1 = with_derivatives(versinc_sq, x2)
+        return c, c1, 0.5 * cubic_sq(x2), sinc_comp_sq(x2)
+    c, c1, c2 = with_derivatives(versinc_sq, x2, order=2)
+    _, s1, s2 = with_derivatives(sinc_sq, x2, order=2)
+    g, g1 = with_derivatives(sinc_comp_sq, x2)
+    return c, c1, c2, s1, s2, g, g1
+
+
+def J_xb_cols(L, u, v, coeffs):
+    """:func:`J_xb` as its two columns ``(d/du, d/dv)``, each a list of 6 scalars, from
+    :func:`bend_coeffs` ``(c, c', s', g)`` (elementwise: vmapped it fuses, no tiny matmuls)."""
+    c, c1, s1, g = coeffs
+    uv = u * v
+    du = [L * (c + 2 * u * u * c1), L * 2 * uv * c1, L * 2 * u * s1, -g * uv, 1.0 - g * v * v, -c * v]
+    dv = [L * 2 * uv * c1, L * (c + 2 * v * v * c1), L * 2 * v * s1, -1.0 + g * u * u, g * uv, c * u]
+    return du, dv
+
+
+def J_xb(design: Design, b):
+    """Twist Jacobian in bending-vector coordinates, (6, 2): ``[p_dot; omega] = J_xb b_dot``.
+
+    Closed form of the derivative of :func:`tip_pose_b` (MODEL.md Sec. 5), with ``x = |b|^2`` and
+    the coefficients of :func:`bend_coeffs`: ``dp/du = L (c + 2u^2 c', 2uv c', 2u s')``,
+    ``dp/dv = L (2uv c', c + 2v^2 c', 2v s')``; ``omega = J_l(rho) rho_dot`` for the rotation vector
+    ``rho = (-v, u, 0)``, with SO(3)'s left Jacobian ``J_l = I + c K + g K^2`` (``K = skew(rho)``):
+    ``omega_u = (-g uv, 1 - g v^2, -c v)``, ``omega_v = (-1 + g u^2, g uv, c u)``.
+    """
+    (b,) = _as_float(design, b)
+    u, v = b[0], b[1]
+    du, dv = J_xb_cols(design.length, u, v, bend_coeffs(u * u + v * v))
+    return jnp.stack([jnp.stack(du), jnp.stack(dv)], axis=1)
 
 
 # --------------------------------------------------------------------------------------------

@@ -16,6 +16,7 @@ and at an equilibrium the stiffness transforms as a tensor (``K_b = P^T K_psi P`
 
 from __future__ import annotations
 
+import functools
 import itertools
 from typing import NamedTuple
 
@@ -23,9 +24,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import eps_of, pinv_tall2, straight_through
+from ._numerics import eps_of, keep, pinv_tall2, pinv_tall2_cols, straight_through
 from .design import Design
-from .kinematics import J_qb, J_qpsi, J_xb, J_xpsi, over_grid, psi_to_b
+from .kinematics import J_qb, J_qpsi, J_xb, J_xb_cols, J_xpsi, bend_coeffs, over_grid, psi_to_b
 
 #: A wire is taut when ``tau_k > TAUT_REL_TOL * max_j tau_j`` (MODEL.md Sec. 4, ``f_min = 0``).
 TAUT_REL_TOL = 1e-6
@@ -80,36 +81,86 @@ def _free_sets(n: int) -> np.ndarray:
     return np.array(list(itertools.product((0.0, 1.0), repeat=n)))
 
 
+#: Up to this many candidate free sets (``2^n``: n <= 5 wires) the set choice is unrolled (fast to run,
+#: slow to compile beyond); above it is vectorised over the sets.
+_UNROLL_MAX_SETS = 32
+
+
+def _choose_free_set(A, rhs, f_min):
+    """Index (into :func:`_free_sets`) of the free set of the QP's solution; no gradient.
+
+    For every set ``S``: ``lam = pinv(A_S A_S^T)(rhs - f_min A 1_{not S})`` and the tensions
+    ``A_S^T lam`` (free) or ``f_min`` (bound). The solution's set is the one whose ``lam`` lies on the
+    right side of ``f_min`` for every wire (``A^T lam >= f_min`` on ``S``, ``<= f_min`` off it) and
+    reaches ``rhs``; the first set of least violation is chosen (exactly one has none when the pose
+    is feasible; ties are sets giving the same tensions). Everything that depends on ``A`` and
+    ``f_min`` alone is shared by all poses under ``vmap``; per pose and set it is a 2x2 product and
+    an ``n``-vector test, elementwise.
+    """
+    A, rhs, f_min = (jax.lax.stop_gradient(x) for x in (A, rhs, f_min))
+    S = jnp.asarray(_free_sets(A.shape[1]), A.dtype)  # (m, n)
+
+    def per_set(m):  # independent of rhs
+        P = pinv_tall2(A.T * m[:, None])  # (2, n) = pinv(A_S)^T
+        return P @ P.T, f_min * (A @ (1.0 - m))  # pinv(A_S A_S^T), the bound wires' pull
+
+    M, c = jax.vmap(per_set)(S)  # (m, 2, 2), (m, 2)
+    inv_norm_A = 1.0 / jnp.linalg.norm(A)
+
+    def violation(free, lam0, lam1):  # lam on the wrong side of f_min for a wire, or rhs missed
+        y = [lam0 * A[0, k] + lam1 * A[1, k] for k in range(len(free))]  # A^T lam
+        tau = [jnp.where(f, yk, f_min) for f, yk in zip(free, y)]
+        wrong = functools.reduce(jnp.maximum, [jnp.where(f, f_min - yk, yk - f_min) for f, yk in zip(free, y)])
+        miss = (jnp.abs(sum(t * A[0, k] for k, t in enumerate(tau)) - rhs[0])
+                + jnp.abs(sum(t * A[1, k] for k, t in enumerate(tau)) - rhs[1])) * inv_norm_A
+        return jnp.maximum(wrong, 0.0) + miss
+
+    def lam_of(j):
+        r0, r1 = rhs[0] - c[j, 0], rhs[1] - c[j, 1]
+        return M[j, 0, 0] * r0 + M[j, 0, 1] * r1, M[j, 1, 0] * r0 + M[j, 1, 1] * r1
+
+    sets = _free_sets(A.shape[1]) > 0.5
+    if len(sets) > _UNROLL_MAX_SETS:  # many wires: vectorised over the sets (compiles fast)
+        return jnp.argmin(violation(list(sets.T), *lam_of(slice(None)))).astype(A.dtype)
+    # few wires: unrolled over the static sets, elementwise, so that vmapped over poses it is one
+    # fused loop (the (m, n)-array form with an argmin runs 2-3x slower on XLA:CPU)
+    best = best_j = None
+    for j, free in enumerate(sets):
+        viol = violation(list(free), *lam_of(j))
+        if best is None:
+            best, best_j = viol, jnp.zeros_like(viol)
+        else:  # strict: the first set of least violation wins
+            best_j = jnp.where(viol < best, float(j), best_j)
+            best = jnp.minimum(viol, best)
+    return best_j
+
+
 def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     """Exact solution of ``min ||tau||^2 s.t. A tau = rhs, tau >= f_min`` for ``A`` of shape (2, n).
 
     Closed-form active set: the KKT conditions are ``tau = max(f_min, A^T lam)``, ``A tau = rhs``.
-    For every free set ``S`` (a static enumeration of the ``2^n`` subsets) the free tensions are
-    the minimum-norm solution of ``A_S tau_S = rhs - f_min A 1_{not S}`` and
-    ``lam = pinv(A_S A_S^T)(...)``; the candidate with the smallest KKT violation is returned (the QP is strictly convex, so the
-    KKT point is unique in ``tau``). Differentiable: the selected closed form carries the gradient.
-    ``feasible`` is False (and the pose must be flagged) when no candidate meets the KKT
-    conditions to ``KKT_TOL`` relative, i.e. the wires cannot hold the pose without pushing.
+    The free set ``S`` (wires strictly above the bound) is found among the ``2^n`` subsets, a static
+    enumeration (:func:`_choose_free_set`); the tensions are then the closed form for that set, the
+    minimum-norm solution of ``A_S tau_S = rhs - f_min A 1_{not S}``: ``lam = pinv(A_S A_S^T)(...)``,
+    ``tau_S = A_S^T lam`` (the QP is strictly convex, so the KKT point is unique in ``tau``).
+    Differentiable: the closed form carries the gradient, the choice of set does not.
+    ``feasible`` is False (and the pose must be flagged) when the result misses the KKT conditions
+    by more than ``KKT_TOL`` relative, i.e. the wires cannot hold the pose without pushing.
     """
     A = jnp.asarray(A)
     n = A.shape[1]
     dt = jnp.result_type(A, rhs, f_min, float)
     A, rhs, f_min = A.astype(dt), jnp.asarray(rhs, dt), jnp.asarray(f_min, dt)
-    S = jnp.asarray(_free_sets(n), dt)  # (m, n)
-
-    def candidate(m):
-        J = A.T * m[:, None]  # (n, 2): rows of the free wires
-        r = rhs - f_min * (A @ (1.0 - m))
-        P = pinv_tall2(J)  # (2, n) = pinv(A_S)^T
-        lam = P @ (P.T @ r)  # pinv(A_S A_S^T) r
-        tau = f_min * (1.0 - m) + P.T @ r
-        return tau, lam
-
-    taus, lams = jax.vmap(candidate)(S)  # (m, n), (m, 2)
-    viol = jax.vmap(lambda t, l: kkt_residual(A, rhs, f_min, t, l))(taus, lams)
-    viol = jax.lax.stop_gradient(viol)
-    i = jnp.argmin(viol)
-    tau, lam = taus[i], lams[i]
+    # The chosen set, materialised once (`keep`): XLA:CPU would otherwise repeat the enumeration
+    # inside the loop of every value that depends on it. Its bits are the free mask (_free_sets
+    # lists the subsets in binary order, first wire most significant).
+    chosen = keep([_choose_free_set(A, rhs, f_min)])[0].astype(jnp.int32)
+    free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
+    P0, P1 = pinv_tall2_cols([A[0, k] * free[k] for k in range(n)], [A[1, k] * free[k] for k in range(n)])
+    r = [rhs[i] - f_min * sum(A[i, k] * (1.0 - free[k]) for k in range(n)) for i in range(2)]
+    t = [P0[k] * r[0] + P1[k] * r[1] for k in range(n)]  # pinv(A_S)^T r: the free tensions
+    tau = jnp.stack([t[k] + f_min * (1.0 - free[k]) for k in range(n)])
+    lam = jnp.stack([sum(P0[k] * t[k] for k in range(n)), sum(P1[k] * t[k] for k in range(n))])
     res = kkt_residual(A, rhs, f_min, tau, lam)
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
@@ -193,9 +244,31 @@ def stiffness_psi(design: Design, theta_L, delta, wrench, tau, mask=None):
 
 
 def _load_terms_b(design: Design, b, w):
-    """``(J_xb (6, 2), d(J_xb^T w)/db (2, 2))`` from one forward-mode pass."""
-    Jx_T_w = lambda bb: (J_xb(design, bb).T @ w, J_xb(design, bb))  # noqa: E731
-    load_geo, Jx = jax.jacfwd(Jx_T_w, has_aux=True)(b)
+    """``(J_xb (6, 2), d(J_xb^T w)/db (2, 2))`` at one pose, in closed form.
+
+    ``J_xb^T w = [dp/du . f + omega_u . m, dp/dv . f + omega_v . m]`` (columns of
+    :func:`~tension_zones.kinematics.J_xb`). The force part is the Hessian of
+    ``L (c (u f_x + v f_y) + s f_z)`` (``p . f``); the moment part differentiates ``omega_u . m``,
+    ``omega_v . m``. Coefficients and their ``x2``-derivatives from
+    :func:`~tension_zones.kinematics.bend_coeffs` (series at the straight pose). Equal to nested
+    forward-mode differentiation of ``J_xb`` (tested), at about a third of the work.
+    """
+    u, v = b[0], b[1]
+    L = design.length
+    c, c1, c2, s1, s2, g, g1 = bend_coeffs(u * u + v * v, second=True)
+    du, dv = J_xb_cols(L, u, v, (c, c1, s1, g))
+    Jx = jnp.stack([jnp.stack(du), jnp.stack(dv)], axis=1)
+    f0, f1, f2, m0, m1, m2 = (w[i] for i in range(6))
+    uu, uv, vv = u * u, u * v, v * v
+    a = u * f0 + v * f1
+    h_uu = L * (2 * c1 * a + 4 * uu * c2 * a + 4 * u * c1 * f0 + 2 * s1 * f2 + 4 * uu * s2 * f2)
+    h_uv = L * (4 * uv * c2 * a + 2 * c1 * (u * f1 + v * f0) + 4 * uv * s2 * f2)
+    h_vv = L * (2 * c1 * a + 4 * vv * c2 * a + 4 * v * c1 * f1 + 2 * s1 * f2 + 4 * vv * s2 * f2)
+    m_uu = -(2 * uv * u * g1 + g * v) * m0 - 2 * uv * v * g1 * m1 - 2 * uv * c1 * m2
+    m_uv = -(2 * uv * v * g1 + g * u) * m0 - (2 * vv * v * g1 + 2 * g * v) * m1 - (2 * vv * c1 + c) * m2
+    m_vu = (2 * uu * u * g1 + 2 * g * u) * m0 + (2 * uv * u * g1 + g * v) * m1 + (2 * uu * c1 + c) * m2
+    m_vv = 2 * uv * u * g1 * m0 + (2 * uv * v * g1 + g * u) * m1 + 2 * uv * c1 * m2
+    load_geo = jnp.stack([jnp.stack([h_uu + m_uu, h_uv + m_uv]), jnp.stack([h_uv + m_vu, h_vv + m_vv])])
     return Jx, load_geo
 
 
@@ -216,17 +289,21 @@ def stiffness_b(design: Design, b, wrench, mask=None):
     return _K_b(design, _load_terms_b(design, b, as_wrench(wrench))[1], mask)
 
 
-def _solve2(K, B):
-    """``K^{-1} B`` for a 2x2 ``K``, and whether ``K`` is positive definite (det > 0, trace > 0).
+def _inv2(k00, k01, k10, k11):
+    """Entries of ``K^{-1}`` for a 2x2 ``K`` given by its entries, and whether ``K`` is positive
+    definite (det > 0, trace > 0). Guarded (double ``where``): a singular or indefinite ``K`` gives
+    zeros and ``ok = False``. Elementwise, so that vmapped it fuses."""
+    det = k00 * k11 - k01 * k10
+    scale = k00 * k00 + k01 * k01 + k10 * k10 + k11 * k11
+    ok = (det > 1e3 * eps_of(det) * scale) & (k00 + k11 > 0)
+    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
+    return (k11 * inv_det, -k01 * inv_det, -k10 * inv_det, k00 * inv_det), ok
 
-    Guarded (double ``where``): a singular or indefinite ``K`` gives zeros and ``ok = False``.
-    """
-    det = K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0]
-    tr = K[0, 0] + K[1, 1]
-    ok = (det > 1e3 * eps_of(K) * jnp.sum(K * K)) & (tr > 0)
-    adj = jnp.array([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]])
-    inv = jnp.where(ok, adj / jnp.where(ok, det, 1.0), 0.0)
-    return inv @ B, ok
+
+def _solve2(K, B):
+    """``K^{-1} B`` for a 2x2 ``K`` (see :func:`_inv2`), and whether ``K`` is positive definite."""
+    (i00, i01, i10, i11), ok = _inv2(K[0, 0], K[0, 1], K[1, 0], K[1, 1])
+    return jnp.array([[i00, i01], [i10, i11]]) @ B, ok
 
 
 def _norm(x):
@@ -265,17 +342,27 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     w = as_wrench(wrench)
     b = _b_of(design, theta_L, delta)
     Jx, load_geo = _load_terms_b(design, b, w)
-    rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
+    Jtw = Jx.T @ w
+    rhs = Jtw - design.backbone_EI * b / design.length  # as in equilibrium_b
     sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
-    mask = taut_mask(design, sol.tau)
-    feas = sol.feasible
-    out = {"tensions": jnp.where(feas, sol.tau, jnp.nan)}
-    for mode, m in (("full", None), ("reduced", mask)):
-        X, ok = _solve2(_K_b(design, load_geo, m), Jx.T @ w)
-        dx = Jx @ X
+    n = design.n_wires
+    Jx = [[Jx[i, j] for i in range(6)] for j in range(2)]  # the two columns; elementwise from here
+    lg, (g0, g1), tau, feas = load_geo.ravel(), Jtw, sol.tau, sol.feasible
+    mask = taut_mask(design, tau)
+    a = J_qb(design)  # (n, 2), constant: the wire term k_w sum_k mask_k a_k a_k^T
+    kw = design.wire_stiffness
+    EI_L = design.backbone_EI / design.length
+    out = {"tensions": jnp.where(feas, tau, jnp.nan)}
+    for mode, m in (("full", jnp.ones(n, Jx[0][0].dtype)), ("reduced", mask)):
+        w00 = kw * sum(m[k] * a[k, 0] * a[k, 0] for k in range(n))
+        w01 = kw * sum(m[k] * a[k, 0] * a[k, 1] for k in range(n))
+        w11 = kw * sum(m[k] * a[k, 1] * a[k, 1] for k in range(n))
+        (i00, i01, i10, i11), ok = _inv2(EI_L - lg[0] + w00, w01 - lg[1], w01 - lg[2], EI_L - lg[3] + w11)
+        X0, X1 = i00 * g0 + i01 * g1, i10 * g0 + i11 * g1  # K_b^{-1} J_xb^T w
+        dx = [Jx[0][i] * X0 + Jx[1][i] * X1 for i in range(6)]  # C_x w = J_xb K_b^{-1} J_xb^T w
         good = feas & ok
-        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(dx[:3]), jnp.nan)
-        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(dx[3:])), jnp.nan)
+        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(jnp.stack(dx[:3])), jnp.nan)
+        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(jnp.stack(dx[3:]))), jnp.nan)
     out["n_taut_statics"] = jnp.sum(jax.lax.stop_gradient(mask)).astype(jnp.int32)
     out["feasible"] = feas
     return out

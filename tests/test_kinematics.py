@@ -5,7 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from conftest import omega_jacobian
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import tension_zones as tz
@@ -208,3 +208,36 @@ def test_over_grid_shapes():
     J = jax.jit(tz.over_grid(tz.J_xq))(d, th, de)
     assert J.shape == (18, 145, 6, 4)
     np.testing.assert_allclose(J[3, 7], tz.J_xq(d, th[3], de[7]), atol=1e-13)
+
+
+def _J_xb_by_autodiff(d, b):
+    """Independent reference: forward-mode derivative of the Rodrigues tip pose, omega = vee(R_dot R^T)."""
+    p_of = lambda bb: tz.tip_pose_b(d, bb)[0]  # noqa: E731
+    R_of = lambda bb: tz.tip_pose_b(d, bb)[1]  # noqa: E731
+    dp = jax.jacfwd(p_of)(b)
+    dR = jax.jacfwd(R_of)(b)  # (3, 3, 2)
+    W = jnp.einsum("ijk,lj->kil", dR, R_of(b))
+    omega = jnp.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=0)
+    return jnp.concatenate([dp, omega], axis=0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(u=st.floats(-2.5, 2.5), v=st.floats(-2.5, 2.5), scale=st.sampled_from([1.0, 1e-3, 0.2, 0.24]))
+def test_closed_form_J_xb_equals_autodiff(u, v, scale):
+    """The closed-form J_xb (left Jacobian of SO(3)) against differentiating the tip pose; the
+    scales put b inside, at and just outside the series range (|b| < 0.23)."""
+    d = _design()
+    b = jnp.array([u, v]) * scale
+    np.testing.assert_allclose(tz.J_xb(d, b), _J_xb_by_autodiff(d, b), rtol=0, atol=2e-13)
+
+
+def test_series_derivatives_match_closed_forms_at_the_switch():
+    """First and second x2-derivatives of the series functions agree across the series/closed switch."""
+    from tension_zones import _numerics as nm
+
+    thr = nm._series_threshold(jnp.float64(1.0))  # x2 < thr: series; one ulp apart on either side
+    for f in (nm.sinc_sq, nm.versinc_sq, nm.cubic_sq, nm.sinc_comp_sq):
+        lo = nm.with_derivatives(f, jnp.float64(np.nextafter(thr, 0.0)), order=2)
+        hi = nm.with_derivatives(f, jnp.float64(np.nextafter(thr, 1.0)), order=2)
+        for a, b, tol in zip(lo, hi, (1e-13, 1e-11, 1e-9)):
+            assert abs(float(a) - float(b)) <= tol * max(abs(float(a)), 1e-3), (f.__name__, a, b)

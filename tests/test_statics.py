@@ -231,3 +231,56 @@ def test_bad_input_is_a_clear_error():
         S.compliance_grid(d, theta_L_deg=[[10.0]])
     with pytest.raises(ValueError, match="theta_L_deg"):
         S.compliance_grid(d, theta_L_deg=[95.0])
+
+
+# ------------------------------------------------------------------------------ closed forms
+@settings(max_examples=40, deadline=None)
+@given(u=st.floats(-1.6, 1.6), v=st.floats(-1.6, 1.6), scale=st.sampled_from([1.0, 1e-3, 0.2, 0.24]),
+       w=st.lists(st.floats(-10.0, 10.0), min_size=6, max_size=6))
+def test_load_terms_equal_nested_autodiff(u, v, scale, w):
+    """The closed-form d(J_xb^T w)/db (force and moment parts) against forward mode over J_xb."""
+    d = _design(3)
+    b, w = jnp.array([u, v]) * scale, jnp.asarray(w) * jnp.array([1, 1, 1, 20, 20, 20])
+    Jx, load_geo = S._load_terms_b(d, b, w)
+    ref = jax.jacfwd(lambda bb: tz.J_xb(d, bb).T @ w)(b)
+    np.testing.assert_allclose(Jx, tz.J_xb(d, b), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(load_geo, ref, rtol=0, atol=1e-11 * (1 + float(jnp.abs(ref).max())))
+
+
+def _qp_reference(A, rhs, f_min):
+    """Independent: every subset by NumPy least squares, the KKT-consistent one (plain loops);
+    returns the tensions and whether they meet the KKT conditions (the pose is feasible)."""
+    n = A.shape[1]
+    best = None
+    for bits in range(2 ** n):
+        free = np.array([(bits >> k) & 1 for k in range(n)], bool)
+        r = rhs - f_min * A[:, ~free].sum(axis=1)
+        tau = np.full(n, f_min)
+        lam = np.zeros(2)
+        if free.any():
+            lam = np.linalg.lstsq(A[:, free] @ A[:, free].T, r, rcond=None)[0]
+            tau[free] = A[:, free].T @ lam
+        err = np.linalg.norm(A @ tau - rhs) + np.abs(tau - np.maximum(f_min, A.T @ lam)).max()
+        if best is None or err < best[0]:
+            best = (err, tau)
+    err, tau = best
+    scale = np.linalg.norm(rhs) + np.abs(A).max() * max(np.abs(tau).max(), f_min, 1e-300)
+    return tau, bool(err <= 1e-9 * scale and tau.min() >= f_min - 1e-9 * scale)
+
+
+@settings(max_examples=40, deadline=None)
+@given(angles=st.lists(st.floats(0.0, 360.0), min_size=3, max_size=6),
+       rhs=st.lists(st.floats(-20.0, 20.0), min_size=2, max_size=2),
+       f_min=st.sampled_from([0.0, 0.5, 3.0]))
+def test_tension_qp_matches_reference_for_any_layout(angles, rhs, f_min):
+    """Uneven (and nearly coincident) wire layouts: the same tensions as the NumPy reference,
+    wherever the pose is feasible."""
+    a = np.radians(np.asarray(angles))
+    A = -1.6 * np.stack([np.cos(a), np.sin(a)])
+    rhs = np.asarray(rhs)
+    sol = jax.jit(S.min_norm_tensions)(A, rhs, f_min)
+    ref, ref_ok = _qp_reference(A, rhs, f_min)
+    if bool(sol.feasible) and ref_ok:
+        np.testing.assert_allclose(sol.tau, ref, rtol=1e-7, atol=1e-7 * max(1.0, ref.max()))
+    elif ref_ok and np.linalg.cond(A @ A.T) < 1e8:
+        pytest.fail(f"feasible by the reference, flagged infeasible: {sol}")
