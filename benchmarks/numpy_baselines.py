@@ -5,8 +5,9 @@ Written from MODEL.md (Sec. 1-4) without importing tension_zones, the way a MATL
   ``Q`` matrix of all ``3^n`` joint-error vectors (Eqs. 17-19);
 * :func:`measures_vectorised`: the same numbers, batched over poses with stacked ``numpy.linalg``
   calls and the ``2^n`` sign vertices;
-* :func:`tensions_scipy_loop`: the tension distribution per pose with ``scipy.optimize.minimize``
-  (SLSQP), as the paper did with MATLAB's interior-point solver.
+* :func:`compliance_scipy_loop`: the compliance sweep per pose: the tension distribution with
+  ``scipy.optimize.minimize`` (SLSQP), as the paper did with MATLAB's interior-point solver, then the
+  stiffness and deflection with NumPy.
 """
 
 from __future__ import annotations
@@ -94,21 +95,48 @@ def measures_vectorised(L, r, alpha, thetas, deltas, dq):
     return {k: v.reshape(len(thetas), len(deltas)) for k, v in out.items()}
 
 
-def tensions_scipy_loop(L, r, alpha, EI, thetas, deltas, wrench, f_min=0.0):
-    """min ||tau||^2 s.t. J_qpsi^T tau = J_xpsi^T w - grad U, tau >= f_min; one SLSQP per pose."""
+def _slsqp_tensions(Jq, rhs, f_min):
+    """min ||tau||^2 s.t. J_qpsi^T tau = rhs, tau >= f_min: one SLSQP call."""
     from scipy.optimize import minimize
 
+    n = Jq.shape[0]
+    res = minimize(lambda t: t @ t, np.full(n, f_min + 1.0), jac=lambda t: 2 * t,
+                   constraints=[{"type": "eq", "fun": lambda t: Jq.T @ t - rhs, "jac": lambda t: Jq.T}],
+                   bounds=[(f_min, None)] * n, method="SLSQP", options={"ftol": 1e-12, "maxiter": 200})
+    return res.x
+
+
+def compliance_scipy_loop(L, r, alpha, EI, k_w, thetas, deltas, wrench, f_min=0.0, h=1e-6,
+                          stiffness=True):
+    """Per pose (MODEL.md Sec. 4; paper Eqs. 23-31 in psi): the tensions by SLSQP, then
+    ``K_psi = hess U + d(J_qpsi^T tau)/dpsi - d(J_xpsi^T w)/dpsi + k_w J~^T J~`` (the two derivative
+    terms by central differences of the analytic Jacobians) and the deflection ``dx = J_xpsi
+    K^{-1} J_xpsi^T w`` for all wires ("full") and the taut ones (``tau_k > 1e-6 max tau``, "reduced").
+
+    Returns a dict of (n_theta, n_delta) arrays ``deflection_mm_<mode>``, ``deflection_deg_<mode>`` and
+    ``tensions`` (n_theta, n_delta, n). ``stiffness=False``: the tensions only.
+    """
     n = len(alpha)
-    out = np.zeros((len(thetas), len(deltas), n))
+    shape = (len(thetas), len(deltas))
+    out = {f"deflection_{u}_{m}": np.zeros(shape) for u in ("mm", "deg") for m in ("full", "reduced")}
+    out["tensions"] = np.zeros(shape + (n,))
+    hess_U = np.array([[EI / L, 0.0], [0.0, 0.0]])
     for i, th in enumerate(thetas):
         for j, de in enumerate(deltas):
             Jx, Jq = jacobians(L, r, alpha, th, de)
-            gradU = np.array([EI * (th - np.pi / 2) / L, 0.0])
-            rhs = Jx.T @ wrench - gradU
-            res = minimize(lambda t: t @ t, np.full(n, f_min + 1.0), jac=lambda t: 2 * t,
-                           constraints=[{"type": "eq", "fun": lambda t: Jq.T @ t - rhs,
-                                         "jac": lambda t: Jq.T}],
-                           bounds=[(f_min, None)] * n, method="SLSQP",
-                           options={"ftol": 1e-12, "maxiter": 200})
-            out[i, j] = res.x
+            rhs = Jx.T @ wrench - np.array([EI * (th - np.pi / 2) / L, 0.0])
+            tau = out["tensions"][i, j] = _slsqp_tensions(Jq, rhs, f_min)
+            if not stiffness:
+                continue
+            geo = np.zeros((2, 2))  # d(J_qpsi^T tau - J_xpsi^T w)/dpsi, column by column
+            for k, e in enumerate(np.eye(2) * h):
+                Jx_p, Jq_p = jacobians(L, r, alpha, th + e[0], de + e[1])
+                Jx_m, Jq_m = jacobians(L, r, alpha, th - e[0], de - e[1])
+                geo[:, k] = ((Jq_p - Jq_m).T @ tau - (Jx_p - Jx_m).T @ wrench) / (2 * h)
+            for mode, mask in (("full", np.ones(n)), ("reduced", tau > 1e-6 * tau.max())):
+                Jt = Jq * mask[:, None]
+                K = hess_U + geo + k_w * Jt.T @ Jt
+                dx = Jx @ np.linalg.solve(K, Jx.T @ wrench)
+                out[f"deflection_mm_{mode}"][i, j] = np.linalg.norm(dx[:3])
+                out[f"deflection_deg_{mode}"][i, j] = np.degrees(np.linalg.norm(dx[3:]))
     return out

@@ -119,16 +119,27 @@ def keep(xs):
     return [v[..., i] for i in range(len(xs))]
 
 
+@jax.custom_jvp
+def _hard_value_soft_tangent(hard, soft):
+    return hard
+
+
+@_hard_value_soft_tangent.defjvp
+def _hard_value_soft_tangent_jvp(primals, tangents):
+    return primals[0], tangents[1]
+
+
 def straight_through(hard, soft):
     """Forward value exactly ``hard``; gradient that of ``soft``.
 
-    Written as ``hard + (soft - stop_gradient(soft))`` rather than ``soft + stop_gradient(hard - soft)``
-    so that the forward value is bit-for-bit the hard value (``x - x == 0`` exactly).
+    A custom JVP (value ``hard``, tangent ``soft``'s) rather than ``hard + (soft - stop_gradient(soft))``:
+    the forward value is bit-for-bit the hard value, and a program that is not differentiated never
+    evaluates ``soft`` (the compiler drops it; n exponentials per pose fewer in a sweep).
     """
     hard = jax.lax.stop_gradient(jnp.asarray(hard, soft.dtype))
     if not _SURROGATE[-1]:
         return hard
-    return hard + (soft - jax.lax.stop_gradient(soft))
+    return _hard_value_soft_tangent(hard, soft)
 
 
 def skew(w):

@@ -21,6 +21,7 @@ flat list of poses (:func:`sweep_poses`):
 
 from __future__ import annotations
 
+import collections
 import math
 from collections.abc import Callable, Sequence
 
@@ -32,6 +33,9 @@ from .design import Design
 
 #: Poses per chunk and device: 2^14 keeps the working set of the kinematic measures near 50 MB.
 DEFAULT_CHUNK = 1 << 14
+#: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
+#: and third chunk in flight keep both cores busy (one program alone runs on about one core).
+IN_FLIGHT = 3
 
 
 def grid_deg(stop: float, step: float, start: float = 0.0) -> np.ndarray:
@@ -102,21 +106,25 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
                 if keep is None or k in keep:
                     results[k] = np.empty((n_poses,) + v.shape[1:], v.dtype)
         for k in results:
-            results[k][start:stop] = np.asarray(res[k][: stop - start])
+            results[k][start:stop] = np.asarray(res[k])[: stop - start]  # slice on the host: no dispatch
 
     starts = range(0, n_poses, chunk)
     with _progress(n_poses, desc, disable=quiet or len(starts) < 2) as bar:
-        pending = None
+        pending = collections.deque()
         for start in starts:
-            nxt = launch(start)  # dispatched asynchronously: overlaps the copy-out of the previous one
-            if pending is not None:
-                store(*pending)
-                bar.update(pending[1] - pending[0])
-            pending = nxt
-        if pending is not None:
-            store(*pending)
-            bar.update(pending[1] - pending[0])
+            # dispatched asynchronously: up to IN_FLIGHT chunks run while the oldest is copied out
+            pending.append(launch(start))
+            if len(pending) >= IN_FLIGHT:
+                _store_oldest(pending, store, bar)
+        while pending:
+            _store_oldest(pending, store, bar)
     return results
+
+
+def _store_oldest(pending, store, bar):
+    start, stop, res = pending.popleft()
+    store(start, stop, res)
+    bar.update(stop - start)
 
 
 def _progress(total, desc, disable):

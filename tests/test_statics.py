@@ -270,7 +270,8 @@ def _qp_reference(A, rhs, f_min):
 
 @settings(max_examples=40, deadline=None)
 @given(angles=st.lists(st.floats(0.0, 360.0), min_size=3, max_size=6),
-       rhs=st.lists(st.floats(-20.0, 20.0), min_size=2, max_size=2),
+       rhs=st.lists(st.floats(-20.0, 20.0).filter(lambda x: x == 0 or abs(x) > 1e-6),  # no underflow
+                    min_size=2, max_size=2),
        f_min=st.sampled_from([0.0, 0.5, 3.0]))
 def test_tension_qp_matches_reference_for_any_layout(angles, rhs, f_min):
     """Uneven (and nearly coincident) wire layouts: the same tensions as the NumPy reference,

@@ -55,6 +55,18 @@ def test_chunks_and_padding_change_nothing(d3, chunk):
     assert res["n_taut"].dtype == ref["n_taut"].dtype
 
 
+@pytest.mark.parametrize("in_flight", [1, 2, 5])
+def test_chunks_in_flight_change_nothing(d3, in_flight, monkeypatch):
+    from tension_zones import sweep
+
+    th, de = rad(grid_deg(85, 17)), rad(grid_deg(360, 30))
+    ref = sweep_grid(tip_and_taut, d3, th, de, 2.0, chunk_size=7, quiet=True)
+    monkeypatch.setattr(sweep, "IN_FLIGHT", in_flight)
+    res = sweep_grid(tip_and_taut, d3, th, de, 2.0, chunk_size=7, quiet=True)
+    for k in ref:  # same compiled program, same pose positions: bit for bit
+        np.testing.assert_array_equal(res[k], ref[k])
+
+
 def test_flat_poses_and_keep(d4):
     rng = np.random.default_rng(0)
     th, de = rng.uniform(0, 1.5, 50), rng.uniform(0, 6.3, 50)

@@ -143,6 +143,21 @@ def test_straight_through_helper_exact_forward():
     np.testing.assert_array_equal(straight_through(hard, soft), hard)
     g = jax.grad(lambda s: jnp.sum(straight_through(hard, s) * jnp.arange(4.0)))(soft)
     np.testing.assert_array_equal(g, jnp.arange(4.0))
+    # forward mode and vmap carry the soft tangent too
+    _, t = jax.jvp(lambda s: straight_through(hard, s), (soft,), (jnp.ones(4),))
+    np.testing.assert_array_equal(t, jnp.ones(4))
+    gv = jax.vmap(jax.grad(lambda s: straight_through(1.0, jnp.tanh(s))))(soft)
+    np.testing.assert_allclose(gv, 1 - jnp.tanh(soft) ** 2, rtol=1e-15)
+
+
+def test_straight_through_forward_never_evaluates_the_surrogate():
+    """A program that is not differentiated drops the soft value (no exp per wire in a sweep)."""
+    from tension_zones._numerics import straight_through
+
+    fwd = jax.jit(lambda x: straight_through(x > 0, jax.nn.sigmoid(x / 0.05)))
+    cost = fwd.lower(jnp.linspace(-1.0, 1.0, 64)).compile().cost_analysis()
+    cost = cost[0] if isinstance(cost, list) else cost
+    assert cost.get("transcendentals", 0.0) == 0.0
 
 
 def test_reduced_jacobians(d3, d4):
