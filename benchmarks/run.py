@@ -3,7 +3,9 @@
     python benchmarks/run.py [--quick] [--json OUT.json] [--no-readme]
 
 Every number is the median of at least 5 timed runs after a warm-up, float64, on this machine's CPU;
-compile time (first call minus the median) is reported separately. Results are written into the
+compile time (first call minus the median) is reported separately. The paths compared are timed
+interleaved (one run of each per repeat) and speed-ups are medians of those paired ratios: this
+machine's speed drifts by up to ~2x from minute to minute. Results are written into the
 table of ``benchmarks/README.md`` (between the RESULTS markers) unless ``--no-readme``.
 Targets are reported, never asserted.
 """
@@ -34,19 +36,6 @@ import tension_zones as tz  # noqa: E402
 REPEATS = 5
 
 
-def timed(fn, repeats=REPEATS):
-    """(first call seconds, median of `repeats` further calls)."""
-    t0 = time.perf_counter()
-    fn()
-    first = time.perf_counter() - t0
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return first, statistics.median(times)
-
-
 def _seconds(fn):
     t0 = time.perf_counter()
     fn()
@@ -71,36 +60,37 @@ def bench_kinematics(quick):
     for n in (3, 4, 8):
         d = tz.Design(n, 20.0, 2.0)
         alpha = np.asarray(d.wire_angles)
-        n_small = th_small.size * de_small.size
         n_big = th_big.size * de_big.size
-        # the per-pose loop is slow (3^n columns): time it once on a slice of the paper grid
-        th_loop = th_small[:: (6 if n == 8 else 1)]
-        _, t_loop = timed(lambda: nb.measures_loop(20.0, 2.0, alpha, th_loop, de_small, 0.4),
-                          repeats=3 if quick else REPEATS)
-        loop_rate = th_loop.size * de_small.size / t_loop
-        _, t_np = timed(lambda: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4),
-                        repeats=3 if quick else REPEATS)
+        n_loop = th_small[:: (6 if n == 8 else 1)].size * de_small.size
+        # the per-pose loop is slow (3^n columns): timed on (a slice of) the paper grid
+        loop = lambda: nb.measures_loop(  # noqa: E731
+            20.0, 2.0, alpha, th_small[:: (6 if n == 8 else 1)], de_small, 0.4)
+        vec = lambda: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4)  # noqa: E731
 
         def jax_run(design=d):
             return sweep_grid(pose_metrics, design, th_big, de_big, 0.4, quiet=True)
 
-        first, t_jax = timed(jax_run, repeats=3 if quick else REPEATS)
+        first = _seconds(jax_run)
+        loop(), vec()  # warm-up
+        # interleaved, as for the compliance sweep: speed-ups are medians of back-to-back ratios
+        t_l, t_n, t_j = [], [], []
+        for _ in range(3 if quick else REPEATS):
+            t_l.append(_seconds(loop))
+            t_n.append(_seconds(vec))
+            t_j.append(_seconds(jax_run))
+        t_jax = statistics.median(t_j)
         # new values of the same shapes: no recompile (second design, timed like the median)
-        d2 = d.replace(pitch_radius=2.5, length=25.0)
-        t0 = time.perf_counter()
-        jax_run(d2)
-        t_new_values = time.perf_counter() - t0
+        t_new_values = _seconds(lambda: jax_run(d.replace(pitch_radius=2.5, length=25.0)))
         rows.append({
             "n_wires": n, "poses": n_big,
-            "loop_poses_per_s": loop_rate,
-            "numpy_poses_per_s": n_big / t_np,
+            "loop_poses_per_s": n_loop / statistics.median(t_l),
+            "numpy_poses_per_s": n_big / statistics.median(t_n),
             "jax_poses_per_s": n_big / t_jax,
             "jax_compile_s": max(first - t_jax, 0.0),
             "jax_new_values_s": t_new_values, "jax_median_s": t_jax,
-            "speedup_vs_loop": (n_big / t_jax) / loop_rate,
-            "speedup_vs_numpy": t_np / t_jax,
+            "speedup_vs_loop": statistics.median(n_big * a / (n_loop * b) for a, b in zip(t_l, t_j)),
+            "speedup_vs_numpy": statistics.median(a / b for a, b in zip(t_n, t_j)),
         })
-        del n_small
     return rows
 
 

@@ -81,9 +81,9 @@ def _free_sets(n: int) -> np.ndarray:
     return np.array(list(itertools.product((0.0, 1.0), repeat=n)))
 
 
-#: Up to this many candidate free sets (``2^n``: n <= 5 wires) the set choice is unrolled (fast to run,
-#: slow to compile beyond); above it is vectorised over the sets.
-_UNROLL_MAX_SETS = 32
+#: Up to this many candidate free sets (``2^n``: n <= 4 wires) the set choice is unrolled (fast to run,
+#: slower to compile, and much slower beyond: 30 s for 8 wires); above it is vectorised over the sets.
+_UNROLL_MAX_SETS = 16
 
 
 def _choose_free_set(A, rhs, f_min):
@@ -120,7 +120,7 @@ def _choose_free_set(A, rhs, f_min):
         return M[j, 0, 0] * r0 + M[j, 0, 1] * r1, M[j, 1, 0] * r0 + M[j, 1, 1] * r1
 
     sets = _free_sets(A.shape[1]) > 0.5
-    if len(sets) > _UNROLL_MAX_SETS:  # many wires: vectorised over the sets (compiles fast)
+    if len(sets) > _UNROLL_MAX_SETS:  # more wires: vectorised over the sets (compiles fast)
         return jnp.argmin(violation(list(sets.T), *lam_of(slice(None)))).astype(A.dtype)
     # few wires: unrolled over the static sets, elementwise, so that vmapped over poses it is one
     # fused loop (the (m, n)-array form with an argmin runs 2-3x slower on XLA:CPU)
@@ -289,21 +289,17 @@ def stiffness_b(design: Design, b, wrench, mask=None):
     return _K_b(design, _load_terms_b(design, b, as_wrench(wrench))[1], mask)
 
 
-def _inv2(k00, k01, k10, k11):
-    """Entries of ``K^{-1}`` for a 2x2 ``K`` given by its entries, and whether ``K`` is positive
-    definite (det > 0, trace > 0). Guarded (double ``where``): a singular or indefinite ``K`` gives
-    zeros and ``ok = False``. Elementwise, so that vmapped it fuses."""
-    det = k00 * k11 - k01 * k10
-    scale = k00 * k00 + k01 * k01 + k10 * k10 + k11 * k11
-    ok = (det > 1e3 * eps_of(det) * scale) & (k00 + k11 > 0)
-    inv_det = jnp.where(ok, 1.0 / jnp.where(ok, det, 1.0), 0.0)
-    return (k11 * inv_det, -k01 * inv_det, -k10 * inv_det, k00 * inv_det), ok
-
-
 def _solve2(K, B):
-    """``K^{-1} B`` for a 2x2 ``K`` (see :func:`_inv2`), and whether ``K`` is positive definite."""
-    (i00, i01, i10, i11), ok = _inv2(K[0, 0], K[0, 1], K[1, 0], K[1, 1])
-    return jnp.array([[i00, i01], [i10, i11]]) @ B, ok
+    """``K^{-1} B`` for a 2x2 ``K``, and whether ``K`` is positive definite (det > 0, trace > 0).
+
+    Guarded (double ``where``): a singular or indefinite ``K`` gives zeros and ``ok = False``.
+    """
+    det = K[0, 0] * K[1, 1] - K[0, 1] * K[1, 0]
+    tr = K[0, 0] + K[1, 1]
+    ok = (det > 1e3 * eps_of(K) * jnp.sum(K * K)) & (tr > 0)
+    adj = jnp.array([[K[1, 1], -K[0, 1]], [-K[1, 0], K[0, 0]]])
+    inv = jnp.where(ok, adj / jnp.where(ok, det, 1.0), 0.0)
+    return inv @ B, ok
 
 
 def _norm(x):
@@ -342,27 +338,17 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     w = as_wrench(wrench)
     b = _b_of(design, theta_L, delta)
     Jx, load_geo = _load_terms_b(design, b, w)
-    Jtw = Jx.T @ w
-    rhs = Jtw - design.backbone_EI * b / design.length  # as in equilibrium_b
+    rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
     sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
-    n = design.n_wires
-    Jx = [[Jx[i, j] for i in range(6)] for j in range(2)]  # the two columns; elementwise from here
-    lg, (g0, g1), tau, feas = load_geo.ravel(), Jtw, sol.tau, sol.feasible
-    mask = taut_mask(design, tau)
-    a = J_qb(design)  # (n, 2), constant: the wire term k_w sum_k mask_k a_k a_k^T
-    kw = design.wire_stiffness
-    EI_L = design.backbone_EI / design.length
-    out = {"tensions": jnp.where(feas, tau, jnp.nan)}
-    for mode, m in (("full", jnp.ones(n, Jx[0][0].dtype)), ("reduced", mask)):
-        w00 = kw * sum(m[k] * a[k, 0] * a[k, 0] for k in range(n))
-        w01 = kw * sum(m[k] * a[k, 0] * a[k, 1] for k in range(n))
-        w11 = kw * sum(m[k] * a[k, 1] * a[k, 1] for k in range(n))
-        (i00, i01, i10, i11), ok = _inv2(EI_L - lg[0] + w00, w01 - lg[1], w01 - lg[2], EI_L - lg[3] + w11)
-        X0, X1 = i00 * g0 + i01 * g1, i10 * g0 + i11 * g1  # K_b^{-1} J_xb^T w
-        dx = [Jx[0][i] * X0 + Jx[1][i] * X1 for i in range(6)]  # C_x w = J_xb K_b^{-1} J_xb^T w
+    mask = taut_mask(design, sol.tau)
+    feas = sol.feasible
+    out = {"tensions": jnp.where(feas, sol.tau, jnp.nan)}
+    for mode, m in (("full", None), ("reduced", mask)):
+        X, ok = _solve2(_K_b(design, load_geo, m), Jx.T @ w)
+        dx = Jx @ X
         good = feas & ok
-        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(jnp.stack(dx[:3])), jnp.nan)
-        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(jnp.stack(dx[3:]))), jnp.nan)
+        out[f"deflection_mm_{mode}"] = jnp.where(good, _norm(dx[:3]), jnp.nan)
+        out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(dx[3:])), jnp.nan)
     out["n_taut_statics"] = jnp.sum(jax.lax.stop_gradient(mask)).astype(jnp.int32)
     out["feasible"] = feas
     return out
