@@ -231,12 +231,16 @@ def test_loaded_equilibrium_is_optimal_with_exact_derivatives():
     q = jnp.asarray(Q_CASES[0][:7])
     load = ms.Load(jnp.array([0.2, -0.1, 0.0]), jnp.array([0.0, 5e-4, -1e-3]))
     _check_optimal(rob, q, load)
+    _assert_J_PQ_matches_fd(rob, q, load, h=1e-4, atol=2e-4)
+
+
+def _assert_J_PQ_matches_fd(rob, q, load, h, atol):
+    """The equilibrium's tip Jacobian against central differences, wire by wire."""
     J = np.asarray(J_PQ(rob, q, load))
-    h = 1e-4
     for k in range(rob.n_wires):
         e = jnp.zeros(rob.n_wires).at[k].set(h)
         fd = (FWD(rob, q + e, load) - FWD(rob, q - e, load)) / (2 * h)
-        np.testing.assert_allclose(J[:, k], fd, atol=2e-4)
+        np.testing.assert_allclose(J[:, k], fd, atol=atol)
 
 
 def test_loaded_single_segment_equilibrium_is_optimal():
@@ -272,13 +276,7 @@ def test_distal_wire_bends_every_segment_it_crosses():
 def test_equilibrium_derivatives_match_finite_differences():
     rob = three_segments(preload=0.5)
     q = jnp.asarray(Q_CASES[0])
-    load = None
-    J = np.asarray(J_PQ(rob, q, load))
-    h = 1e-6
-    for k in range(rob.n_wires):
-        e = jnp.zeros(rob.n_wires).at[k].set(h)
-        fd = (FWD(rob, q + e, load) - FWD(rob, q - e, load)) / (2 * h)
-        np.testing.assert_allclose(J[:, k], fd, atol=1e-5)
+    _assert_J_PQ_matches_fd(rob, q, None, h=1e-6, atol=1e-5)
     # reverse mode through the implicit rule, in a robot parameter
     @jax.jit
     def tip_x(ei):
