@@ -19,6 +19,7 @@ from ._numerics import (
     float_dtype,
     pinv_tall2,
     rotvec_to_matrix,
+    sinc_versinc_cubic,
     sinc_comp_sq,
     sinc_sq,
     versinc_sq,
@@ -87,22 +88,24 @@ def J_xpsi(design: Design, theta_L, delta):
     return J_xpsi_from_terms(design.length, J_xpsi_terms(theta_L, delta))
 
 
-def J_xpsi_terms(theta_L, delta):
+def J_xpsi_terms(theta_L, delta, trig=None):
     """The transcendental part of :func:`J_xpsi`: ``(T, c, s, sd, cd, A/T^2, (s - 1)/T, (T s + c)/T^2)``.
 
     Split out so that a caller evaluating many measures per pose can compute these once (and keep
     them, see :func:`tension_zones._numerics.keep`); :func:`J_xpsi_from_terms` does the rest.
+    ``trig = (cos theta_L, sin theta_L, sin delta, cos delta)`` if the caller already has them.
     """
     T = theta_L - THETA_0
-    T2 = T * T
-    c = jnp.cos(theta_L)
-    sd, cd = jnp.sin(delta), jnp.cos(delta)
-    # With s = cos T and c = -sin T:  A/T^2 = (1 - cos T)/T^2 - sin T/T,
-    # (s - 1)/T = -T (1 - cos T)/T^2,  (T s + c)/T^2 = T (T cos T - sin T)/T^3.
-    a_over_T2 = versinc_sq(T2) - sinc_sq(T2)
-    s1_over_T = -T * versinc_sq(T2)
-    z_term = T * cubic_sq(T2)
-    s = jnp.sin(theta_L)
+    if trig is None:
+        trig = (jnp.cos(theta_L), jnp.sin(theta_L), jnp.sin(delta), jnp.cos(delta))
+    c, s, sd, cd = trig
+    # sin T = -c and cos T = s, so the ratios need no further sine or cosine:
+    # A/T^2 = (1 - cos T)/T^2 - sin T/T,  (s - 1)/T = -T (1 - cos T)/T^2,
+    # (T s + c)/T^2 = T (T cos T - sin T)/T^3.
+    sinc, versinc, cubic = sinc_versinc_cubic(T, -c, s)
+    a_over_T2 = versinc - sinc
+    s1_over_T = -T * versinc
+    z_term = T * cubic
     return T, c, s, sd, cd, a_over_T2, s1_over_T, z_term
 
 

@@ -19,7 +19,7 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ._numerics import eps_of, keep, pinv_tall2_cols
+from ._numerics import eps_of, gram_pinv_cols, keep, pinv_rows
 from .design import Design
 from .kinematics import J_xpsi_from_terms, J_xpsi_terms, _as_float
 from .zones import mask_from_score
@@ -127,10 +127,17 @@ def _pose_inputs(design: Design, theta_L, delta):
     """
     theta_L, delta = _as_float(design, theta_L, delta)
     n = design.n_wires
-    delta_k = delta + design.wire_angles
-    cos_k, sin_k = jnp.cos(delta_k), jnp.sin(delta_k)
-    kept = keep(list(J_xpsi_terms(theta_L, delta)) + [cos_k[k] for k in range(n)]
-                + [sin_k[k] for k in range(n)])
+    # the four sines and cosines are kept first: XLA:CPU would otherwise re-evaluate them inside each
+    # value kept below (it duplicates a producer into every consumer loop)
+    trig = keep([jnp.cos(theta_L), jnp.sin(theta_L), jnp.sin(delta), jnp.cos(delta)])
+    sd, cd = trig[2], trig[3]
+    terms = J_xpsi_terms(theta_L, delta, trig)
+    # cos/sin(delta + alpha_k) by the addition theorem: the wires' angles are the design's, so their
+    # sines and cosines are computed once per design, not per pose (2n fewer per pose)
+    ca, sa = jnp.cos(design.wire_angles), jnp.sin(design.wire_angles)
+    cos_k = [cd * ca[k] - sd * sa[k] for k in range(n)]
+    sin_k = [sd * ca[k] + cd * sa[k] for k in range(n)]
+    kept = keep(list(terms) + cos_k + sin_k)
     terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
     T, r = terms[0], design.pitch_radius
     a = [r * c for c in cos_k]
@@ -193,7 +200,9 @@ def _zonogon_vertices_cols(g0, g1):
 def _measures(Jx, blocks, a, b, dq, n_wires):
     """Every measure of :func:`pose_measures` from :func:`_pose_inputs` (masked columns ``a``, ``b``)
     and the two blocks' :func:`_block_parts`."""
-    P0, P1 = pinv_tall2_cols(a, b)  # rows of P (2, n); zero columns for slack wires
+    # rows of P = pinv(J~_qpsi) (2, n); zero columns for slack wires. pinv(G) first: kept, so that
+    # its Gram matrix and determinant are not recomputed for each of P's 2n entries
+    P0, P1 = pinv_rows(keep(gram_pinv_cols(a, b)), a, b)
     n = len(P0)
     kept = keep(P0 + P1)  # shared by the 8 outputs below: computed once
     P0, P1 = kept[:n], kept[n:]

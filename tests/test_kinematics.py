@@ -221,6 +221,26 @@ def _J_xb_by_autodiff(d, b):
     return jnp.concatenate([dp, omega], axis=0)
 
 
+@pytest.mark.parametrize("x", [0.0, 1e-9, -0.05, 0.2, 0.23, 0.24, -0.7, 1.5, 3.0])
+def test_series_from_sin_and_cos_equal_the_series_functions(x):
+    """``sinc_versinc_cubic`` (from a sine and cosine the caller has) equals ``sinc_sq``, ``versinc_sq``
+    and ``cubic_sq`` on both sides of the series switch (|x| ~ 0.23), and so do its gradients,
+    finite at 0."""
+    from tension_zones import _numerics as nm
+
+    def mine(x):
+        return jnp.stack(nm.sinc_versinc_cubic(x, jnp.sin(x), jnp.cos(x)))
+
+    def ref(x):
+        return jnp.stack([f(x * x) for f in (nm.sinc_sq, nm.versinc_sq, nm.cubic_sq)])
+
+    x = jnp.float64(x)
+    np.testing.assert_allclose(mine(x), ref(x), rtol=1e-12, atol=1e-300)
+    g, g_ref = jax.jacfwd(mine)(x), jax.jacfwd(ref)(x)
+    assert np.all(np.isfinite(g))
+    np.testing.assert_allclose(g, g_ref, rtol=1e-9, atol=1e-12)
+
+
 @settings(max_examples=40, deadline=None)
 @given(u=st.floats(-2.5, 2.5), v=st.floats(-2.5, 2.5), scale=st.sampled_from([1.0, 1e-3, 0.2, 0.24]))
 def test_closed_form_J_xb_equals_autodiff(u, v, scale):

@@ -305,3 +305,20 @@ def test_bad_mask_is_a_clear_error():
         pose_measures(d, 0.5, 0.1, 0.4, jnp.ones(3))
     with pytest.raises(ValueError, match="mask must have shape"):
         pose_measures(d, 0.5, 0.1, 0.4, jnp.ones((4, 1)))
+
+
+@pytest.mark.parametrize("n", [3, 8])
+def test_a_swept_pose_evaluates_four_sines_and_cosines(n):
+    """The compiled sweep program evaluates ``cos/sin theta_L`` and ``cos/sin delta`` once per pose and
+    nothing else trigonometric per pose (the wires' angles enter by the addition theorem, per design).
+    XLA:CPU re-evaluates a shared producer inside every consumer loop unless it is kept
+    (``_numerics.keep``); this guards against that regression (benchmarks/PROFILE.md)."""
+    import re
+
+    d = tz.Design(n, 20.0, 2.0)
+    N = 1000  # a batch size no design array has
+    f = jax.jit(lambda d, t, e: jax.vmap(lambda a, b: pose_metrics(d, a, b))(t, e))
+    hlo = f.lower(d, jnp.zeros(N), jnp.zeros(N)).compile().as_text()
+    per_pose = re.findall(r"= f64\[([^\]]*)\]\S* (sine|cosine)\(", hlo)
+    per_pose = sorted(op for shape, op in per_pose if str(N) in shape)
+    assert per_pose == ["cosine", "cosine", "sine", "sine"]
