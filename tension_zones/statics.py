@@ -165,12 +165,8 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
 
-def _kkt_scale(A, rhs, f_min, tau):
-    return (
-        jnp.linalg.norm(rhs)
-        + jnp.linalg.norm(A) * jnp.maximum(jnp.max(jnp.abs(tau)), f_min)
-        + jnp.finfo(A.dtype).tiny
-    )
+def _hypot(xs):
+    return jnp.sqrt(sum(x * x for x in xs))
 
 
 def kkt_residual(A, rhs, f_min, tau, lam):
@@ -178,10 +174,17 @@ def kkt_residual(A, rhs, f_min, tau, lam):
 
     Both are zero exactly at the optimum (stationarity, bounds, dual feasibility and
     complementarity are all in ``tau = max(f_min, A^T lam)``); scaled by ``|rhs| + |A| max tau``.
+    Written on scalars (``A`` is 2 x n): vmapped, the per-pose products stay elementwise instead of
+    tiny batched matrix products, which XLA:CPU hands to a library call per chunk.
     """
-    primal = jnp.linalg.norm(A @ tau - rhs)
-    station = jnp.max(jnp.abs(tau - jnp.maximum(f_min, A.T @ lam))) * jnp.linalg.norm(A)
-    return (primal + station) / _kkt_scale(A, rhs, f_min, tau)
+    n = A.shape[1]
+    norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
+    primal = _hypot([sum(A[i, k] * tau[k] for k in range(n)) - rhs[i] for i in range(2)])
+    station = functools.reduce(jnp.maximum, [
+        jnp.abs(tau[k] - jnp.maximum(f_min, A[0, k] * lam[0] + A[1, k] * lam[1])) for k in range(n)])
+    max_tau = functools.reduce(jnp.maximum, [jnp.abs(tau[k]) for k in range(n)])
+    scale = _hypot([rhs[0], rhs[1]]) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
+    return (primal + station * norm_A) / scale
 
 
 def equilibrium_b(design: Design, b, wrench):
@@ -255,7 +258,9 @@ def _load_terms_b(design: Design, b, w):
     """
     u, v = b[0], b[1]
     L = design.length
-    c, c1, c2, s1, s2, g, g1 = bend_coeffs(u * u + v * v, second=True)
+    # kept: every entry below depends on them, and XLA:CPU would re-evaluate their sines and
+    # cosines inside each (the 12 of J_xb, the 4 of the load term)
+    c, c1, c2, s1, s2, g, g1 = keep(bend_coeffs(u * u + v * v, second=True))
     du, dv = J_xb_cols(L, u, v, (c, c1, s1, g))
     Jx = jnp.stack([jnp.stack(du), jnp.stack(dv)], axis=1)
     f0, f1, f2, m0, m1, m2 = (w[i] for i in range(6))
@@ -336,7 +341,7 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     push) or a stiffness is not positive definite, the deflections and tensions are NaN.
     """
     w = as_wrench(wrench)
-    b = _b_of(design, theta_L, delta)
+    b = jnp.stack(keep(list(_b_of(design, theta_L, delta))))  # its sine and cosine, once per pose
     Jx, load_geo = _load_terms_b(design, b, w)
     rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
     sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
