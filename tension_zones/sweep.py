@@ -6,10 +6,11 @@ flat list of poses (:func:`sweep_poses`):
 
 * **bounded memory**: poses are evaluated in fixed-size chunks by one compiled ``vmap`` (every
   chunk, the last and a small sweep's only one included, is padded to ``chunk_size`` poses per
-  device, so there is exactly one compilation per function, wire count and chunk size, whatever
-  the grid);
-  only the results live on the host, preallocated once (``keep=`` drops the outputs you do not
-  need). A 10^7-pose sweep of the 17 kinematic measures takes about 1.3 GB of results.
+  device, so there is one compilation per function, wire count and chunk size; for
+  :func:`sweep_grid` also per power-of-two class of the grid's axis lengths, as a grid's poses are
+  generated on the device from the two axis vectors); only the results live on the host,
+  preallocated once, one block per dtype with each output a row of it (``keep=`` drops the outputs
+  you do not need). A 10^7-pose sweep of the 17 kinematic measures takes about 1.3 GB of results.
 * **no recompiles when only values change**: the design's numbers and the extra ``args`` are traced
   arguments; ``fn`` is a static argument (pass the same function object to reuse the compiled code).
 * **progress**: a ``tqdm`` bar on sweeps of more than one chunk, unless ``quiet``.
@@ -26,6 +27,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
@@ -61,9 +63,29 @@ def _eval_chunk(fn, design, theta_L, delta, args):
 _eval_chunk_jit = jax.jit(_eval_chunk, static_argnums=0)
 
 
+def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses, args):
+    """:func:`_eval_chunk` on grid poses ``start, start + 1, ...`` (row-major, ``delta`` fastest),
+    generated on the device: no pose arrays cross from the host per chunk (a copy that competes with
+    the computation for the cores). ``layout = (chunk, sharding)`` (static) fixes the chunk; the
+    padding past the last pose repeats the last pose. The grid vectors are padded to a power of two
+    (:func:`_grid_capacity`), so that a grid of another size rarely means another program."""
+    chunk, sharding = layout
+    i = jnp.minimum(start + jnp.arange(chunk, dtype=start.dtype), n_poses - 1)
+    i = jax.lax.with_sharding_constraint(i, sharding)
+    return _eval_chunk(fn, design, th_grid[i // n_de], de_grid[i % n_de], args)
+
+
+_eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
+
+
+def _grid_capacity(size: int) -> int:
+    return max(64, 1 << (size - 1).bit_length())
+
+
 def compiled_chunk_count() -> int:
-    """How many chunk programs have been compiled so far (one per function, wire count, chunk size)."""
-    return _eval_chunk_jit._cache_size()
+    """How many chunk programs have been compiled so far (one per function, wire count, chunk size
+    and, for grids, power-of-two class of the grid's axis lengths)."""
+    return _eval_chunk_jit._cache_size() + _eval_grid_chunk_jit._cache_size()
 
 
 def _mesh(devices):
@@ -73,8 +95,9 @@ def _mesh(devices):
     return Mesh(np.array(devices), ("poses",)), len(devices)
 
 
-def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, desc):
-    """Core loop: evaluate ``fn`` on poses ``poses_of(start, stop)`` in chunks; results flat (N, ...)."""
+def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, desc, grid=None):
+    """Core loop: evaluate ``fn`` on poses ``poses_of(start, stop)`` (host arrays) or, given
+    ``grid = (theta_L, delta)``, on that grid's poses generated on the device; results flat (N, ...)."""
     if not isinstance(design, Design):
         raise TypeError(f"design must be a tension_zones.Design, got {type(design).__name__}")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
@@ -86,8 +109,20 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     design_d = jax.device_put(design, replicated)
     args_d = jax.device_put(jax.tree_util.tree_map(np.asarray, tuple(args)), replicated)
 
+    if grid is not None:
+        # the grid on the device once; chunks are then only a start index
+        th_g, de_g = (np.asarray(x, dt) for x in grid)
+        th_g, de_g = (np.concatenate([x, np.zeros(_grid_capacity(x.size) - x.size, dt)]) for x in (th_g, de_g))
+        idx_t = np.int64 if n_poses + chunk >= 2**31 else np.int32
+        grid_d = jax.device_put((th_g, de_g, idx_t(grid[1].size), idx_t(n_poses)), replicated)
+
     def launch(start):
         stop = min(start + chunk, n_poses)
+        if grid is not None:
+            th_g, de_g, n_de, n_all = grid_d
+            res = _eval_grid_chunk_jit(fn, (chunk, batch), design_d, idx_t(start), th_g, de_g, n_de, n_all,
+                                       args_d)
+            return start, stop, res
         th, de = (np.asarray(x, dt) for x in poses_of(start, stop))
         if stop - start < chunk:  # pad with the first pose: one compiled shape for every chunk
             pad = chunk - (stop - start)
@@ -102,9 +137,15 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
             missing = sorted(set(keep or ()) - set(res))
             if missing:
                 raise ValueError(f"keep names unknown output(s) {missing}; the function returns {sorted(res)}")
+            # one block per dtype and shape, each output a row of it: a few large allocations, which
+            # NumPy backs with huge pages, rather than one per output (first-touch page faults of
+            # 4 KB pages cost up to a quarter of a kinematic sweep)
+            groups = collections.defaultdict(list)
             for k, v in res.items():
                 if keep is None or k in keep:
-                    results[k] = np.empty((n_poses,) + v.shape[1:], v.dtype)
+                    groups[(v.dtype, v.shape[1:])].append(k)
+            for (dtype, shape), keys in groups.items():
+                results.update(zip(keys, np.empty((len(keys), n_poses) + shape, dtype)))
         for k in results:
             results[k][start:stop] = np.asarray(res[k])[: stop - start]  # slice on the host: no dispatch
 
@@ -183,7 +224,8 @@ def sweep_grid(
     """Evaluate ``fn`` on the grid ``theta_L (n_theta,) x delta (n_delta,)`` (rad).
 
     Same arguments as :func:`sweep_poses`; returns arrays ``(n_theta, n_delta, ...)``. The flat pose
-    list is never built: each chunk's poses come from its index range (row-major, ``delta`` fastest).
+    list is never built: each chunk's poses are generated on the device from its index range
+    (row-major, ``delta`` fastest).
     """
     th = np.asarray(theta_L, dtype=float)
     de = np.asarray(delta, dtype=float)
@@ -191,9 +233,5 @@ def sweep_grid(
         raise ValueError(f"theta_L and delta must be 1-D grids, got shapes {th.shape} and {de.shape}")
     nt, nd = th.size, de.size
 
-    def poses_of(a, b):
-        idx = np.arange(a, b)
-        return th[idx // nd], de[idx % nd]
-
-    flat = _run(fn, design, nt * nd, poses_of, args, chunk_size, devices, quiet, keep, desc)
+    flat = _run(fn, design, nt * nd, None, args, chunk_size, devices, quiet, keep, desc, grid=(th, de))
     return {k: v.reshape((nt, nd) + v.shape[1:]) for k, v in flat.items()}

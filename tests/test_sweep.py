@@ -84,6 +84,11 @@ def test_no_recompile_when_only_values_change(d3):
     res = sweep_grid(tip_and_taut, other, th + 0.01, de, 3.0, chunk_size=32, quiet=True)
     assert compiled_chunk_count() == n0
     np.testing.assert_allclose(res["p"], direct(other, th + 0.01, de, 3.0)["p"], rtol=1e-14)
+    # a grid of other axis lengths in the same power-of-two class: the same program
+    th2, de2 = rad(grid_deg(80, 20)), rad(grid_deg(350, 50))
+    res = sweep_grid(tip_and_taut, other, th2, de2, 3.0, chunk_size=32, quiet=True)
+    assert compiled_chunk_count() == n0
+    np.testing.assert_allclose(res["p"], direct(other, th2, de2, 3.0)["p"], rtol=1e-14)
 
 
 def test_bad_input_is_a_clear_error(d3):
