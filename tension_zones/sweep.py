@@ -6,9 +6,9 @@ flat list of poses (:func:`sweep_poses`):
 
 * **bounded memory**: poses are evaluated in fixed-size chunks by one compiled ``vmap`` (every
   chunk, the last and a small sweep's only one included, is padded to ``chunk_size`` poses per
-  device, so there is one compilation per function, wire count and chunk size; for
-  :func:`sweep_grid` also per power-of-two class of the grid's axis lengths, as a grid's poses are
-  generated on the device from the two axis vectors); only the results live on the host,
+  device, so there is exactly one compilation per function, wire count and chunk size, whatever
+  the grid; :func:`sweep_grid` generates its poses on the device from the two axis vectors, padded
+  to a chunk, unless an axis is longer than a chunk); only the results live on the host,
   preallocated once, one block per dtype with each output a row of it (``keep=`` drops the outputs
   you do not need). A 10^7-pose sweep of the 17 kinematic measures takes about 1.3 GB of results.
 * **no recompiles when only values change**: the design's numbers and the extra ``args`` are traced
@@ -67,8 +67,8 @@ def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses,
     """:func:`_eval_chunk` on grid poses ``start, start + 1, ...`` (row-major, ``delta`` fastest),
     generated on the device: no pose arrays cross from the host per chunk (a copy that competes with
     the computation for the cores). ``layout = (chunk, sharding)`` (static) fixes the chunk; the
-    padding past the last pose repeats the last pose. The grid vectors are padded to a power of two
-    (:func:`_grid_capacity`), so that a grid of another size rarely means another program."""
+    padding past the last pose repeats the last pose. The axis vectors come padded to the chunk
+    size, so the program depends on no grid dimension."""
     chunk, sharding = layout
     i = jnp.minimum(start + jnp.arange(chunk, dtype=start.dtype), n_poses - 1)
     i = jax.lax.with_sharding_constraint(i, sharding)
@@ -78,13 +78,9 @@ def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses,
 _eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
 
 
-def _grid_capacity(size: int) -> int:
-    return max(64, 1 << (size - 1).bit_length())
-
-
 def compiled_chunk_count() -> int:
     """How many chunk programs have been compiled so far (one per function, wire count, chunk size
-    and, for grids, power-of-two class of the grid's axis lengths)."""
+    and kind: flat poses, or a grid whose poses are generated on the device)."""
     return _eval_chunk_jit._cache_size() + _eval_grid_chunk_jit._cache_size()
 
 
@@ -97,7 +93,8 @@ def _mesh(devices):
 
 def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, desc, grid=None):
     """Core loop: evaluate ``fn`` on poses ``poses_of(start, stop)`` (host arrays) or, given
-    ``grid = (theta_L, delta)``, on that grid's poses generated on the device; results flat (N, ...)."""
+    ``grid = (theta_L, delta)`` with both axes no longer than a chunk, on that grid's poses generated
+    on the device; results flat (N, ...)."""
     if not isinstance(design, Design):
         raise TypeError(f"design must be a tension_zones.Design, got {type(design).__name__}")
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
@@ -109,10 +106,13 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     design_d = jax.device_put(design, replicated)
     args_d = jax.device_put(jax.tree_util.tree_map(np.asarray, tuple(args)), replicated)
 
+    if grid is not None and max(x.size for x in grid) > chunk:
+        grid = None  # an axis longer than a chunk: the poses come from the host (poses_of)
     if grid is not None:
-        # the grid on the device once; chunks are then only a start index
+        # the grid's axes on the device once (padded to the chunk size: the program does not depend on
+        # the grid's shape); each chunk is then only a start index
         th_g, de_g = (np.asarray(x, dt) for x in grid)
-        th_g, de_g = (np.concatenate([x, np.zeros(_grid_capacity(x.size) - x.size, dt)]) for x in (th_g, de_g))
+        th_g, de_g = (np.concatenate([x, np.zeros(chunk - x.size, dt)]) for x in (th_g, de_g))
         idx_t = np.int64 if n_poses + chunk >= 2**31 else np.int32
         grid_d = jax.device_put((th_g, de_g, idx_t(grid[1].size), idx_t(n_poses)), replicated)
 
@@ -233,5 +233,9 @@ def sweep_grid(
         raise ValueError(f"theta_L and delta must be 1-D grids, got shapes {th.shape} and {de.shape}")
     nt, nd = th.size, de.size
 
-    flat = _run(fn, design, nt * nd, None, args, chunk_size, devices, quiet, keep, desc, grid=(th, de))
+    def poses_of(a, b):  # used only when an axis is longer than a chunk
+        idx = np.arange(a, b)
+        return th[idx // nd], de[idx % nd]
+
+    flat = _run(fn, design, nt * nd, poses_of, args, chunk_size, devices, quiet, keep, desc, grid=(th, de))
     return {k: v.reshape((nt, nd) + v.shape[1:]) for k, v in flat.items()}
