@@ -121,20 +121,23 @@ def frozen_masks():
         _SURROGATE.pop()
 
 
-def keep(xs):
-    """The list of same-shape arrays ``xs`` unchanged, computed once: a fusion barrier for XLA:CPU.
+def keep(xs, anchor):
+    """The list of arrays ``xs`` unchanged, each computed once: a fusion barrier for XLA:CPU.
 
     XLA:CPU has no multi-output fusion: it re-computes a fusible producer inside the loop of every
-    consumer, so a pose's sines and cosines were evaluated once per output measure (17 outputs, ~80
-    transcendentals per pose). A product with the 2x2 identity is a library call it cannot fuse
-    through, so its operands are materialised once. Exact for finite values (``1 x + 0 y = x``; a
-    ``-0.0`` may become ``+0.0``); linear, so gradients pass unchanged.
+    consumer, so a pose's sines and cosines were evaluated once per output measure (17 outputs).
+    The values pass through a conditional whose predicate (``anchor`` is finite) is known only at run
+    time; its operands are materialised once, and both branches return them (one as ``x + 0``, so that
+    the compiler cannot merge the branches and drop the conditional). ``anchor`` is a scalar that is
+    not batched where ``keep`` runs under ``vmap`` (the design's length): a batched predicate turns
+    the conditional into a select, which is still exact but no barrier. Exact (the branch never taken
+    for a finite anchor may turn ``-0.0`` into ``+0.0``); linear, so gradients pass unchanged.
+    (The earlier barrier, a product with the 2x2 identity, cost a library call and two transposes per
+    keep: about a third of a kinematic sweep.)
     """
-    xs = list(xs)
-    pad = [jnp.zeros_like(xs[0])] if len(xs) % 2 else []
-    v = jnp.stack(xs + pad, axis=-1)
-    v = (v.reshape(v.shape[:-1] + (-1, 2)) @ jnp.eye(2, dtype=v.dtype)).reshape(v.shape)
-    return [v[..., i] for i in range(len(xs))]
+    xs = tuple(xs)
+    pred = jnp.isfinite(jnp.asarray(anchor))
+    return list(jax.lax.cond(pred, lambda t: t, lambda t: tuple(x + jnp.zeros_like(x) for x in t), xs))
 
 
 @jax.custom_jvp

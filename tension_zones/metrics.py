@@ -129,7 +129,7 @@ def _pose_inputs(design: Design, theta_L, delta):
     n = design.n_wires
     # the four sines and cosines are kept first: XLA:CPU would otherwise re-evaluate them inside each
     # value kept below (it duplicates a producer into every consumer loop)
-    trig = keep([jnp.cos(theta_L), jnp.sin(theta_L), jnp.sin(delta), jnp.cos(delta)])
+    trig = keep([jnp.cos(theta_L), jnp.sin(theta_L), jnp.sin(delta), jnp.cos(delta)], design.length)
     sd, cd = trig[2], trig[3]
     terms = J_xpsi_terms(theta_L, delta, trig)
     # cos/sin(delta + alpha_k) by the addition theorem: the wires' angles are the design's, so their
@@ -137,7 +137,7 @@ def _pose_inputs(design: Design, theta_L, delta):
     ca, sa = jnp.cos(design.wire_angles), jnp.sin(design.wire_angles)
     cos_k = [cd * ca[k] - sd * sa[k] for k in range(n)]
     sin_k = [sd * ca[k] + cd * sa[k] for k in range(n)]
-    kept = keep(list(terms) + cos_k + sin_k)
+    kept = keep(list(terms) + cos_k + sin_k, design.length)
     terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
     T, r = terms[0], design.pitch_radius
     a = [r * c for c in cos_k]
@@ -197,14 +197,15 @@ def _zonogon_vertices_cols(g0, g1):
     return plus + minus
 
 
-def _measures(Jx, blocks, a, b, dq, n_wires):
+def _measures(Jx, blocks, a, b, dq, design):
     """Every measure of :func:`pose_measures` from :func:`_pose_inputs` (masked columns ``a``, ``b``)
-    and the two blocks' :func:`_block_parts`."""
+    and the two blocks' :func:`_block_parts`; ``design`` for its wire count and as the anchor of
+    :func:`~tension_zones._numerics.keep`."""
     # rows of P = pinv(J~_qpsi) (2, n); zero columns for slack wires. pinv(G) first: kept, so that
     # its Gram matrix and determinant are not recomputed for each of P's 2n entries
-    P0, P1 = pinv_rows(keep(gram_pinv_cols(a, b)), a, b)
+    P0, P1 = pinv_rows(keep(gram_pinv_cols(a, b), design.length), a, b)
     n = len(P0)
-    kept = keep(P0 + P1)  # shared by the 8 outputs below: computed once
+    kept = keep(P0 + P1, design.length)  # shared by the 8 outputs below: computed once
     P0, P1 = kept[:n], kept[n:]
     # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
     # exactly 0); exactly 0 with one non-zero column (one taut wire)
@@ -212,7 +213,7 @@ def _measures(Jx, blocks, a, b, dq, n_wires):
     g00 = sum(x * x for x in P0)
     g01 = sum(x * y for x, y in zip(P0, P1))
     g11 = sum(y * y for y in P1)
-    rtol = max(3, n_wires) * eps_of(Jx)
+    rtol = max(3, design.n_wires) * eps_of(Jx)
     out = {}
     for part, parts in zip("vw", blocks):
         s1, s2 = _sv2_parts(parts, g00, g01, g11, det_Gp)
@@ -262,7 +263,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         a = [x * mask[k] for k, x in enumerate(a)]
         b = [y * mask[k] for k, y in enumerate(b)]
     blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
-    return _measures(Jx, blocks, a, b, dq, design.n_wires)
+    return _measures(Jx, blocks, a, b, dq, design)
 
 
 def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
@@ -278,6 +279,6 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
     reduced = ([x * mask[k] for k, x in enumerate(a)], [y * mask[k] for k, y in enumerate(b)])
     for mode, (aa, bb) in (("full", (a, b)), ("reduced", reduced)):
-        for k, v in _measures(Jx, blocks, aa, bb, dq, design.n_wires).items():
+        for k, v in _measures(Jx, blocks, aa, bb, dq, design).items():
             out[f"{k}_{mode}"] = v
     return out

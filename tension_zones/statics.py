@@ -154,7 +154,7 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     # The chosen set, materialised once (`keep`): XLA:CPU would otherwise repeat the enumeration
     # inside the loop of every value that depends on it. Its bits are the free mask (_free_sets
     # lists the subsets in binary order, first wire most significant).
-    chosen = keep([_choose_free_set(A, rhs, f_min)])[0].astype(jnp.int32)
+    chosen = keep([_choose_free_set(A, rhs, f_min)], A[0, 0])[0].astype(jnp.int32)
     free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
     P0, P1 = pinv_tall2_cols([A[0, k] * free[k] for k in range(n)], [A[1, k] * free[k] for k in range(n)])
     r = [rhs[i] - f_min * sum(A[i, k] * (1.0 - free[k]) for k in range(n)) for i in range(2)]
@@ -260,7 +260,7 @@ def _load_terms_b(design: Design, b, w):
     L = design.length
     # kept: every entry below depends on them, and XLA:CPU would re-evaluate their sines and
     # cosines inside each (the 12 of J_xb, the 4 of the load term)
-    c, c1, c2, s1, s2, g, g1 = keep(bend_coeffs(u * u + v * v, second=True))
+    c, c1, c2, s1, s2, g, g1 = keep(bend_coeffs(u * u + v * v, second=True), L)
     du, dv = J_xb_cols(L, u, v, (c, c1, s1, g))
     Jx = jnp.stack([jnp.stack(du), jnp.stack(dv)], axis=1)
     f0, f1, f2, m0, m1, m2 = (w[i] for i in range(6))
@@ -341,7 +341,7 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     push) or a stiffness is not positive definite, the deflections and tensions are NaN.
     """
     w = as_wrench(wrench)
-    b = jnp.stack(keep(list(_b_of(design, theta_L, delta))))  # its sine and cosine, once per pose
+    b = jnp.stack(keep(list(_b_of(design, theta_L, delta)), design.length))  # its sine and cosine, once per pose
     Jx, load_geo = _load_terms_b(design, b, w)
     rhs = Jx.T @ w - design.backbone_EI * b / design.length  # as in equilibrium_b
     sol = min_norm_tensions(J_qb(design).T, rhs, design.preload)
