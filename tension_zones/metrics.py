@@ -146,11 +146,21 @@ def _pose_inputs(design: Design, theta_L, delta):
 
 
 def _block_parts(A):
-    """The pose-only pieces of :func:`_sv2` for a (3, 2) block (shared by full and reduced)."""
-    a1, a2 = A[:, 0], A[:, 1]
-    det_H = jnp.sum(jnp.cross(a1, a2) ** 2)
-    r00 = _sqrt0(jnp.dot(a1, a1))
-    return det_H, r00, _div0(jnp.dot(a1, a2), r00), _div0(_sqrt0(det_H), r00)
+    """The pose-only pieces of :func:`_sv2` for a (3, 2) block (shared by full and reduced).
+
+    On scalars: vmapped, ``jnp.dot``/``jnp.cross`` of 3-vectors become batched products that
+    XLA:CPU hands to a library call each (a fifth of a kinematic chunk's time)."""
+    a1, a2 = [A[i, 0] for i in range(3)], [A[i, 1] for i in range(3)]
+    cross = [a1[1] * a2[2] - a1[2] * a2[1], a1[2] * a2[0] - a1[0] * a2[2], a1[0] * a2[1] - a1[1] * a2[0]]
+    det_H = sum(c * c for c in cross)
+    r00 = _sqrt0(sum(x * x for x in a1))
+    return det_H, r00, _div0(sum(x * y for x, y in zip(a1, a2)), r00), _div0(_sqrt0(det_H), r00)
+
+
+def _kept_blocks(Jx, design):
+    """:func:`_block_parts` of ``J_v`` and ``J_w``, kept: each feeds six outputs."""
+    kept = keep(list(_block_parts(Jx[:3])) + list(_block_parts(Jx[3:])), design.length)
+    return tuple(kept[:4]), tuple(kept[4:])
 
 
 def _sv2_parts(parts, g00, g01, g11, det_Gp):
@@ -262,7 +272,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
                              f"got {mask.shape}")
         a = [x * mask[k] for k, x in enumerate(a)]
         b = [y * mask[k] for k, y in enumerate(b)]
-    blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
+    blocks = _kept_blocks(Jx, design)
     return _measures(Jx, blocks, a, b, dq, design)
 
 
@@ -276,7 +286,7 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     Jx, a, b, score = _pose_inputs(design, theta_L, delta)  # shared by both modes
     mask = mask_from_score(jnp.stack(score))
     out = {"n_taut": jnp.sum(mask > 0.5).astype(jnp.int32)}
-    blocks = (_block_parts(Jx[:3]), _block_parts(Jx[3:]))
+    blocks = _kept_blocks(Jx, design)
     reduced = ([x * mask[k] for k, x in enumerate(a)], [y * mask[k] for k, y in enumerate(b)])
     for mode, (aa, bb) in (("full", (a, b)), ("reduced", reduced)):
         for k, v in _measures(Jx, blocks, aa, bb, dq, design).items():
