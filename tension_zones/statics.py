@@ -165,10 +165,6 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
 
-def _hypot(xs):
-    return jnp.sqrt(sum(x * x for x in xs))
-
-
 def kkt_residual(A, rhs, f_min, tau, lam):
     """Relative KKT violation: ``|A tau - rhs|`` and ``|tau - max(f_min, A^T lam)|``.
 
@@ -179,11 +175,11 @@ def kkt_residual(A, rhs, f_min, tau, lam):
     """
     n = A.shape[1]
     norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
-    primal = _hypot([sum(A[i, k] * tau[k] for k in range(n)) - rhs[i] for i in range(2)])
+    primal = _norm([sum(A[i, k] * tau[k] for k in range(n)) - rhs[i] for i in range(2)])
     station = functools.reduce(jnp.maximum, [
         jnp.abs(tau[k] - jnp.maximum(f_min, A[0, k] * lam[0] + A[1, k] * lam[1])) for k in range(n)])
     max_tau = functools.reduce(jnp.maximum, [jnp.abs(tau[k]) for k in range(n)])
-    scale = _hypot([rhs[0], rhs[1]]) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
+    scale = _norm(rhs) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
     return (primal + station * norm_A) / scale
 
 
@@ -308,8 +304,9 @@ def _solve2(K, B):
 
 
 def _norm(x):
-    """Euclidean norm with a zero (not NaN) gradient at ``x = 0`` (double ``where``)."""
-    s = jnp.sum(x * x)
+    """Euclidean norm of a short vector (an array or a list of scalars) with a zero (not NaN) gradient
+    at ``x = 0`` (double ``where``). Summed elementwise: vmapped, no per-pose reduction op."""
+    s = sum(v * v for v in x)
     nz = s > 0
     return jnp.where(nz, jnp.sqrt(jnp.where(nz, s, 1.0)), 0.0)
 
