@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from tension_zones import robot_fit as rf
-from tension_zones.multisegment import Robot
+from tension_zones.model._robot import Robot
 from tension_zones.opencr import read_opencr
 
 HERE = Path(__file__).resolve().parent

@@ -51,8 +51,8 @@ def grid(theta_step, delta_step):
 # ------------------------------------------------------------------------------------------------
 def bench_kinematics(quick):
     """KCI, sigma_min, dp_max, dw_max (full and reduced) for n = 3, 4, 8: loop, NumPy, JAX."""
-    from tension_zones.metrics import pose_metrics
-    from tension_zones.sweep import sweep_grid
+    from tension_zones.analysis._metrics import pose_metrics
+    from tension_zones.analysis._sweep import sweep_grid
 
     rows = []
     th_small, de_small = grid(5.0, 2.5)  # the paper's grid: 2610 poses
@@ -97,7 +97,7 @@ def bench_kinematics(quick):
 def bench_compliance(quick):
     """The compliance sweep on the paper's Sec. 6.2 grid: per pose (SLSQP tensions, NumPy stiffness
     and deflection) vs batched JAX; the two must agree."""
-    from tension_zones.statics import compliance_grid
+    from tension_zones.model._statics import compliance_grid
 
     th = np.radians(np.linspace(89.0, 45.0, 10))
     de = np.radians(np.arange(0.0, 360.0 + 1e-9, 15.0))
@@ -144,8 +144,8 @@ _SCALING_CHILD = textwrap.dedent("""
     import json, sys, time
     import numpy as np
     import tension_zones as tz
-    from tension_zones.metrics import pose_metrics
-    from tension_zones.sweep import sweep_grid
+    from tension_zones.analysis._metrics import pose_metrics
+    from tension_zones.analysis._sweep import sweep_grid
     n_poses, n_wires = int(sys.argv[1]), int(sys.argv[2])
     n_delta = 1441
     n_theta = max(1, round(n_poses / n_delta))
@@ -311,8 +311,8 @@ def bench_calibration(quick):
 
 def bench_optimiser(quick):
     """One optimiser run per wire count (free wire angles, full circle, deflection included)."""
-    from tension_zones.optimise import optimize
-    from tension_zones.scenario import parse_scenario
+    from tension_zones.design._optimise import optimize
+    from tension_zones.design._scenario import parse_scenario
 
     rows = []
     for n in (3, 4, 5):

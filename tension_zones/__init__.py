@@ -4,8 +4,8 @@ Importing the package enables float64 in JAX (see :mod:`tension_zones._config`).
 """
 
 from . import _config  # noqa: F401  (must run before any array is made)
-from .design import DEFAULT_BACKBONE_EI, DEFAULT_WIRE_STIFFNESS, Design
-from .kinematics import (
+from .model import DEFAULT_BACKBONE_EI, DEFAULT_WIRE_STIFFNESS, Design
+from .model import (
     THETA_0,
     J_qb,
     J_qpsi,
@@ -21,11 +21,11 @@ from .kinematics import (
     wire_lengths,
     wire_lengths_b,
 )
-from .optimise import evaluate_design, optimize, spread
-from .scenario import Scenario, load_scenario, parse_scenario
-from .metrics import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
-from .sweep import grid_deg, sweep_grid, sweep_poses
-from .statics import (
+from .design import evaluate_design, optimize, spread
+from .design import Scenario, load_scenario, parse_scenario
+from .analysis import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
+from .analysis import grid_deg, sweep_grid, sweep_poses
+from .model import (
     PAPER_DELTA_DEG,
     PAPER_THETA_L_DEG,
     PAPER_WRENCH,
@@ -40,7 +40,7 @@ from .statics import (
     taut_mask,
     tensions,
 )
-from .zones import (
+from .model import (
     BOUNDARY_TOL,
     TEMPERATURE,
     Sector,
@@ -52,7 +52,7 @@ from .zones import (
     tension_score,
 )
 
-from .calib import (  # noqa: E402  (issue 6: calibration)
+from .calibration import (  # noqa: E402  (issue 6: calibration)
     DataError,
     Dataset,
     SegmentModel,

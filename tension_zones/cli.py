@@ -29,7 +29,7 @@ def _parse_angles(text: str | None, n_wires: int | None):
 
 
 def _design(args, length=20.0, pitch_radius=2.0):
-    from .design import Design
+    from .model._design import Design
 
     d = {"n_wires": args.wires, "length_mm": length, "pitch_radius_mm": pitch_radius}
     if getattr(args, "angles", None) is not None:
@@ -53,7 +53,7 @@ def cmd_maps(args) -> None:
     import matplotlib.pyplot as plt
 
     from .plots import plot_tension_map
-    from .zones import tension_map
+    from .model._zones import tension_map
 
     out = _out_path(args.out, ".png")
     design = _design(args)
@@ -68,15 +68,15 @@ def cmd_maps(args) -> None:
 
 
 def cmd_reproduce(args) -> None:
-    from .reproduce import reproduce
+    from .paper._reproduce import reproduce
 
     reproduce(Path(args.out), quiet=args.quiet)
 
 
 # --- optimize (issue 5) -----------------------------------------------------------------------
 def cmd_optimize(args) -> None:
-    from .optimise import optimize, write_outputs
-    from .scenario import load_scenario
+    from .design._optimise import optimize, write_outputs
+    from .design._scenario import load_scenario
 
     try:
         sc = load_scenario(args.scenario)
@@ -102,7 +102,7 @@ def cmd_optimize(args) -> None:
 # ---- sweep (issue 3): workspace performance maps ------------------------------------------------
 def _kinematics_measure(args):
     """MODEL.md Sec. 3 measures, full and reduced: ``(per-pose function, extra args)``."""
-    from .metrics import pose_metrics
+    from .analysis._metrics import pose_metrics
 
     return pose_metrics, (args.dq,)
 
@@ -130,8 +130,8 @@ def _load_arg(text: str) -> np.ndarray:
 
 def _with_compliance(args):
     """Kinematic measures plus the tension-only statics (issue 4) in one per-pose function."""
-    from .metrics import pose_metrics
-    from .statics import as_wrench, compliance_pose
+    from .analysis._metrics import pose_metrics
+    from .model._statics import as_wrench, compliance_pose
 
     wrench = as_wrench(_load_arg(args.load))
 
@@ -142,8 +142,8 @@ def _with_compliance(args):
 
 
 def cmd_sweep(args) -> None:
-    from .statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
-    from .sweep import grid_deg, sweep_grid
+    from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
+    from .analysis._sweep import grid_deg, sweep_grid
 
     out = _out_path(args.out, ".npz")
     if args.compliance:
@@ -215,8 +215,8 @@ def _add_sweep_parser(sub) -> None:
 def cmd_calibrate(args) -> None:
     if args.format == "opencr":
         return _calibrate_opencr(args)
-    from .calib import DataError, calibrate, load_csv, write_report
-    from .design import Design
+    from .calibration import DataError, calibrate, load_csv, write_report
+    from .model._design import Design
 
     if args.validate is not None or args.effects is not None:
         raise CLIError("--validate and --effects go with --format opencr")
@@ -250,7 +250,7 @@ def _out_dir(path: str) -> Path:
 
 def _calibrate_opencr(args) -> None:
     """A multi-segment robot from OpenCR recordings (``tension_zones.robot_calib``)."""
-    from .multisegment import Robot
+    from .model._robot import Robot
     from .opencr import read_opencr
     from .robot_calib import CANDIDATES, calibrate_robot, write_report
     from .robot_fit import effect_names

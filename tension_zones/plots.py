@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Wedge
 
-from .zones import TensionMap
+from .model._zones import TensionMap
 
 _COUNT_COLOURS = {0: "#d62728", 1: "#fdd49e", 2: "#9ecae1", 3: "#74c476", 4: "#31a354"}
 

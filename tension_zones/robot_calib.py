@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from . import robot_fit as rf
-from .calib.diagnose import GLITCH_SIGMAS, structure_test
-from .multisegment import Robot
+from .calibration.diagnose import GLITCH_SIGMAS, structure_test
+from .model._robot import Robot
 from .opencr import OpenCRData
 
 #: Candidate effects, in the order they are tried (gravity last: its equilibrium needs the Hessian

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._numerics import rotvec_to_matrix
-from .multisegment import Load, Robot, _design_with, equilibrium, tip_pose
+from .model._robot import Load, Robot, _design_with, equilibrium, tip_pose
 
 
 # --------------------------------------------------------------------------------------------

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from simulator import Truth, write_set
 
-from tension_zones.calib import DataError, load_csv
+from tension_zones.calibration import DataError, load_csv
 from tension_zones.cli import main
 
 

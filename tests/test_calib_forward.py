@@ -8,10 +8,10 @@ from hypothesis import strategies as st
 from simulator import _equilibrium, position
 
 import tension_zones as tz
-from tension_zones.calib import Dataset, SegmentModel, equilibrium, motion_direction, tip_position
-from tension_zones.calib.effects import LIBRARY, NOMINAL, play
-from tension_zones.calib.forward import energy
-from tension_zones.calib.model import Problem, engine, predict_theta
+from tension_zones.calibration import Dataset, SegmentModel, equilibrium, motion_direction, tip_position
+from tension_zones.calibration.effects import LIBRARY, NOMINAL, play
+from tension_zones.calibration.forward import energy
+from tension_zones.calibration.model import Problem, engine, predict_theta
 
 D3 = tz.Design(3, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=2.0)
 PHYS = SegmentModel(3).physical(D3)
@@ -36,7 +36,7 @@ def test_equilibrium_is_stationary_and_matches_scipy(q, f):
 def test_position_is_the_kinematics_tip_pose():
     for b in ([0.0, 0.0], [0.3, -0.2], [1e-9, 0.0], [-1.1, 0.6]):
         b = jnp.asarray(b)
-        from tension_zones.calib.forward import _position
+        from tension_zones.calibration.forward import _position
 
         np.testing.assert_allclose(_position(b, D3.length), tz.tip_pose_b(D3, b)[0], atol=1e-13)
         np.testing.assert_allclose(position(np.asarray(b), 20.0), tz.tip_pose_b(D3, b)[0], atol=1e-6)

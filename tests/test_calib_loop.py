@@ -12,7 +12,7 @@ import pytest
 from simulator import Truth, write_set
 
 import tension_zones as tz
-from tension_zones.calib import calibrate, load_csv
+from tension_zones.calibration import calibrate, load_csv
 from tension_zones.cli import main
 
 ALONE = {

@@ -4,7 +4,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tension_zones import compliance_fit as cf
+from tension_zones.paper import _identify as cf
 
 
 def test_paper_means_order():

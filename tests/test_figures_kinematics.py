@@ -13,8 +13,8 @@ import json
 import numpy as np
 import pytest
 
-from tension_zones.figures_kinematics import DQ, PITCH_RADIUS, reproduce_kinematics
-from tension_zones.reproduce import STEPS
+from tension_zones.paper._figures_kinematics import DQ, PITCH_RADIUS, reproduce_kinematics
+from tension_zones.paper._reproduce import STEPS
 
 
 @pytest.fixture(scope="module")

@@ -16,8 +16,8 @@ from hypothesis import assume, given
 from hypothesis import strategies as st
 
 import tension_zones as tz
-from tension_zones.metrics import MEASURES, pose_measures, pose_metrics, zonogon_vertices
-from tension_zones.sweep import grid_deg, sweep_grid
+from tension_zones.analysis._metrics import MEASURES, pose_measures, pose_metrics, zonogon_vertices
+from tension_zones.analysis._sweep import grid_deg, sweep_grid
 
 rad = np.radians
 TH = rad(grid_deg(85, 5))

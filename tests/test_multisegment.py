@@ -10,7 +10,7 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 import tension_zones as tz
-from tension_zones import multisegment as ms
+from tension_zones.model import _robot as ms
 
 DEG = np.pi / 180
 

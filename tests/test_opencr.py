@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import tension_zones as tz
-from tension_zones import multisegment as ms
+from tension_zones.model import _robot as ms
 from tension_zones import robot_fit as rf
 from tension_zones.opencr import read_opencr, servo_map_from_labels
 

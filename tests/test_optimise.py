@@ -10,8 +10,8 @@ from hypothesis import example, given
 from hypothesis import strategies as st
 
 import tension_zones as tz
-from tension_zones import optimise as opt
-from tension_zones.scenario import DEFAULTS, load_scenario, parse_scenario
+from tension_zones.design import _optimise as opt
+from tension_zones.design._scenario import DEFAULTS, load_scenario, parse_scenario
 
 
 # -- scenario -----------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
     assert summary["tension_maps"]["one_taut_wire_fraction"]["4"] < 0.02
     assert (tmp_path / "fig5_tension_map_3w.png").stat().st_size > 10_000
     # Sec. 6.2: identified segment, Tables 1-2 within 10 % on average, three-wire ratio >= 2.5
-    from tension_zones.compliance_fit import PAPER_TABLE
+    from tension_zones.paper._identify import PAPER_TABLE
 
     comp = summary["compliance"]
     ident = comp["identified"]

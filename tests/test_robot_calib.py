@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from tension_zones import multisegment as ms
+from tension_zones.model import _robot as ms
 from tension_zones import robot_calib as rc
 from tension_zones import robot_fit as rf
 from tension_zones.cli import main

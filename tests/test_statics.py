@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import tension_zones as tz
-from tension_zones import statics as S
+from tension_zones.model import _statics as S
 
 
 def _design(n, **kw):

@@ -12,8 +12,8 @@ import pytest
 
 import tension_zones as tz
 from tension_zones.cli import main
-from tension_zones.metrics import MEASURES
-from tension_zones.sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses
+from tension_zones.analysis._metrics import MEASURES
+from tension_zones.analysis._sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses
 
 from test_metrics import ref_measures  # noqa: E402  (tests/ is on sys.path)
 
@@ -57,7 +57,7 @@ def test_chunks_and_padding_change_nothing(d3, chunk):
 
 @pytest.mark.parametrize("in_flight", [1, 2, 5])
 def test_chunks_in_flight_change_nothing(d3, in_flight, monkeypatch):
-    from tension_zones import sweep
+    from tension_zones.analysis import _sweep as sweep
 
     th, de = rad(grid_deg(85, 17)), rad(grid_deg(360, 30))
     ref = sweep_grid(tip_and_taut, d3, th, de, 2.0, chunk_size=7, quiet=True)
@@ -129,8 +129,8 @@ def test_progress_bar_on_long_sweeps_only(d3, capsys):
 SHARDED = textwrap.dedent("""
     import jax, numpy as np
     import tension_zones as tz
-    from tension_zones.metrics import pose_metrics
-    from tension_zones.sweep import sweep_grid, grid_deg
+    from tension_zones.analysis._metrics import pose_metrics
+    from tension_zones.analysis._sweep import sweep_grid, grid_deg
     assert len(jax.devices()) == 4, jax.devices()
     d = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([0.0, 80.0, 180.0, 260.0]))
     th, de = np.radians(grid_deg(85, 5)), np.radians(grid_deg(360, 2.5))

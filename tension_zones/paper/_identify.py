@@ -13,9 +13,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .design import Design
-from .kinematics import over_grid
-from .statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, compliance_pose
+from ..model._design import Design
+from ..model._kinematics import over_grid
+from ..model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, compliance_pose
 
 #: Paper Tables 1-2: {n_wires: {k_w: (pos mean mm, pos SD mm, ang mean deg, ang SD deg)}}
 #: (reduced Jacobian, no preload; Table 1 is k_w = 75 N/mm).

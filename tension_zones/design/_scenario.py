@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from .design import DEFAULT_BACKBONE_EI, read_json
+from ..model._design import DEFAULT_BACKBONE_EI, read_json
 
 #: Every scenario key, its default and its meaning (the README's table is generated from this).
 DEFAULTS: dict[str, Any] = {

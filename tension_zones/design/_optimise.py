@@ -38,9 +38,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .design import Design
-from .scenario import Scenario
-from .zones import tension_mask
+from ..model._design import Design
+from ._scenario import Scenario
+from ..model._zones import tension_mask
 
 #: Penalty weight on the mean squared controllability violation (objective units per unit^2).
 SPREAD_PENALTY = 1e3
@@ -154,8 +154,8 @@ def _pose_terms(design: Design, theta_L, delta, task: _Task, with_defl: bool = T
     dp_max: reduced-Jacobian position-uncertainty bound (paper Eq. 19, metrics.pose_measures);
     deflection: reduced compliance under the scenario's load (paper Eq. 31, statics).
     """
-    from .metrics import pose_measures
-    from .statics import compliance_pose
+    from ..analysis._metrics import pose_measures
+    from ..model._statics import compliance_pose
 
     mask = tension_mask(design, delta)
     dp = pose_measures(design, theta_L, delta, task.dq, mask=mask)["dp_max"]
@@ -413,7 +413,7 @@ def write_outputs(result: dict[str, Any], out_dir) -> list:
     import json
     from pathlib import Path
 
-    from .plots import plot_convergence, plot_tradeoff
+    from ..plots import plot_convergence, plot_tradeoff
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..design import Design
+from ..model._design import Design
 from .._numerics import sinc_sq, versinc_sq
 
 #: Damped-Newton iterations: a 2-D piecewise-quadratic problem converges in a handful; the rest is margin.

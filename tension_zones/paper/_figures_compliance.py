@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .compliance_fit import FIT_KEYS, PAPER_REDUCED_OVER_TRADITIONAL_3, PAPER_TABLE, identify
-from .design import Design
-from .statics import PAPER_WRENCH, compliance_grid
+from ._identify import FIT_KEYS, PAPER_REDUCED_OVER_TRADITIONAL_3, PAPER_TABLE, identify
+from ..model._design import Design
+from ..model._statics import PAPER_WRENCH, compliance_grid
 
 K_VALUES = (55.0, 65.0, 75.0, 85.0, 95.0, 105.0)
 COLORS = {3: "tab:red", 4: "tab:blue"}

@@ -28,10 +28,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import pinv_tall2, straight_through
-from .design import Design, read_json
-from .kinematics import b_to_psi, tip_pose_b
-from .zones import BOUNDARY_TOL, TEMPERATURE
+from .._numerics import pinv_tall2, straight_through
+from ._design import Design, read_json
+from ._kinematics import b_to_psi, tip_pose_b
+from ._zones import BOUNDARY_TOL, TEMPERATURE
 
 
 # --------------------------------------------------------------------------------------------

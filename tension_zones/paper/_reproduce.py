@@ -16,9 +16,9 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     """Paper Figs. 5 and 7: the three- and four-wire tension maps, with their sector tables."""
     import matplotlib.pyplot as plt
 
-    from .design import Design
-    from .plots import plot_tension_map
-    from .zones import tension_map
+    from ..model._design import Design
+    from ..plots import plot_tension_map
+    from ..model._zones import tension_map
 
     written = []
     tables = {}
@@ -46,13 +46,13 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
 
 
 def _kinematics(out: Path, summary: dict, quiet: bool) -> list[Path]:
-    from .figures_kinematics import reproduce_kinematics
+    from ._figures_kinematics import reproduce_kinematics
 
     return reproduce_kinematics(out, summary, quiet)
 
 
 def _compliance(out: Path, summary: dict, quiet: bool) -> list[Path]:
-    from .figures_compliance import compliance_step
+    from ._figures_compliance import compliance_step
 
     return compliance_step(out, summary, quiet)
 

@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import float_dtype, straight_through
-from .design import Design
-from .kinematics import THETA_0, J_qpsi, J_xq
+from .._numerics import float_dtype, straight_through
+from ._design import Design
+from ._kinematics import THETA_0, J_qpsi, J_xq
 
 #: Boundary rule: a wire whose normalised pull rate is at most this is not in tension.
 BOUNDARY_TOL = 1e-9

@@ -14,7 +14,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from ._numerics import (
+from .._numerics import (
     cubic_sq,
     float_dtype,
     pinv_tall2,
@@ -25,7 +25,7 @@ from ._numerics import (
     versinc_sq,
     with_derivatives,
 )
-from .design import Design
+from ._design import Design
 
 THETA_0 = jnp.pi / 2
 

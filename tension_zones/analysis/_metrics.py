@@ -19,10 +19,10 @@ import functools
 import jax
 import jax.numpy as jnp
 
-from ._numerics import eps_of, gram_pinv_cols, keep, pinv_rows
-from .design import Design
-from .kinematics import J_xpsi_from_terms, J_xpsi_terms, _as_float
-from .zones import mask_from_score
+from .._numerics import eps_of, gram_pinv_cols, keep, pinv_rows
+from ..model._design import Design
+from ..model._kinematics import J_xpsi_from_terms, J_xpsi_terms, _as_float
+from ..model._zones import mask_from_score
 
 #: The paper's headline joint-level uncertainty (mm), Figs. 11-12.
 DEFAULT_DQ = 0.4

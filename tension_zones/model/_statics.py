@@ -24,9 +24,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._numerics import eps_of, keep, pinv_tall2, pinv_tall2_cols, straight_through
-from .design import Design
-from .kinematics import J_qb, J_qpsi, J_xb, J_xb_cols, J_xpsi, bend_coeffs, over_grid, psi_to_b
+from .._numerics import eps_of, keep, pinv_tall2, pinv_tall2_cols, straight_through
+from ._design import Design
+from ._kinematics import J_qb, J_qpsi, J_xb, J_xb_cols, J_xpsi, bend_coeffs, over_grid, psi_to_b
 
 #: A wire is taut when ``tau_k > TAUT_REL_TOL * max_j tau_j`` (MODEL.md Sec. 4, ``f_min = 0``).
 TAUT_REL_TOL = 1e-6

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from .design import Design
+from ..model._design import Design
 
 #: Poses per chunk and device: 2^14 keeps the working set of the kinematic measures near 50 MB.
 DEFAULT_CHUNK = 1 << 14
