@@ -52,15 +52,17 @@ from .model import (
     tension_score,
 )
 
-from .calibration import (  # noqa: E402  (issue 6: calibration)
+from .calibration import (  # noqa: E402
     DataError,
     Dataset,
-    SegmentModel,
     calibrate,
-    equilibrium,
-    load_csv,
+    load_data,
+    read_csv,
+    read_opencr,
     write_report,
 )
+from .model import Load, Robot, equilibrium, forward  # noqa: E402
+from ._examples import copy_examples, example_path, list_examples  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -68,10 +70,17 @@ __all__ = [
     "BOUNDARY_TOL",
     "DataError",
     "Dataset",
-    "SegmentModel",
     "calibrate",
+    "copy_examples",
+    "example_path",
+    "list_examples",
     "equilibrium",
-    "load_csv",
+    "forward",
+    "Load",
+    "Robot",
+    "read_csv",
+    "read_opencr",
+    "load_data",
     "write_report",
     "DEFAULT_BACKBONE_EI",
     "DEFAULT_DQ",

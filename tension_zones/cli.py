@@ -211,103 +211,131 @@ def _add_sweep_parser(sub) -> None:
 # ---- end sweep (issue 3) -----------------------------------------------------------------------
 
 
-# ---- calibrate (issue 6; --format opencr: issue 8) --------------------------------------------
+# ---- calibrate ---------------------------------------------------------------------------------
 def cmd_calibrate(args) -> None:
-    if args.format == "opencr":
-        return _calibrate_opencr(args)
-    from .calibration import DataError, calibrate, load_csv, write_report
-    from .model._design import Design
+    """Fit a robot (one segment or many) to tracker data, trace the residual to effects, report."""
+    import warnings
 
-    if args.validate is not None or args.effects is not None:
-        raise CLIError("--validate and --effects go with --format opencr")
+    from .calibration import DataError, calibrate, load_data, write_report
+    from .calibration._report import FILES
+    from .calibration.effects import BY_NAME
+    from .calibration.effects import library as default_library
+    from .model import Robot
+
+    out = _out_dir(args.out, FILES, args.force)
     try:
-        design = Design.from_json(args.design)
-        data = load_csv(args.data, n_wires=design.n_wires, length=float(design.length),
-                        drop_bad=args.drop_bad)
-        out = _out_dir(args.out)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            robot = Robot.from_json(args.design)
+        for w in caught:
+            print(f"tension-zones: warning: {w.message}", file=sys.stderr)
+        kw = {"n_wires": robot.n_wires, "drop_bad": args.drop_bad}
+        if args.format == "model":
+            kw["length"] = float(robot.lengths.sum())
+        data = load_data(args.data, args.format, **kw)
+        val = None
+        if args.validate is not None:
+            if args.format == "opencr":
+                kw["servo_ids"] = data.servo_ids  # the training file's servo map
+            val = load_data(args.validate, args.format, **kw)
+        library = None
+        if args.effects is not None:
+            names = [e.strip() for e in args.effects.split(",") if e.strip()]
+            known = [e.name for e in default_library(data.frame)]
+            unknown = [n for n in names if n not in known]
+            if unknown:
+                raise CLIError(f"--effects: unknown effect {unknown[0]!r}; candidates for these data: "
+                               f"{', '.join(known)}")
+            library = tuple(BY_NAME[n] for n in names)
         log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
-        res = calibrate(data, design, holdout=0.25 if args.holdout is None else args.holdout,
-                        robust=args.robust, log=log)
+        res = calibrate(data, robot, validate=val, library=library,
+                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust, log=log)
     except DataError as e:
         raise CLIError(str(e)) from None
-    report = write_report(res, out)
+    report = write_report(res, out, design=str(args.design), validate=args.validate)
     found = ", ".join(e["name"] for e in report["effects"]) or "none"
-    print(f"held-out RMSE: declared {report['rmse_declared_mm']:.4f} mm, nominal fit "
-          f"{report['rmse_before_mm']:.4f} mm, after {report['rmse_after_mm']:.4f} mm "
-          f"(noise floor {report['noise_floor_mm']:.4f} mm); effects added: {found}; "
-          f"unexplained structure: {'yes' if report['unexplained_structure'] else 'no'}; "
-          f"dropped rows: {report['dropped_rows']}")
+    line = (f"held-out RMSE: declared {report['rmse_declared_mm']:.4f} mm, nominal fit "
+            f"{report['rmse_before_mm']:.4f} mm, after {report['rmse_after_mm']:.4f} mm "
+            f"(noise floor {report['noise_floor_mm']:.4f} mm); effects added: {found}; "
+            f"unexplained structure: {'yes' if report['unexplained_structure'] else 'no'}; "
+            f"dropped rows: {report['dropped_rows']}")
+    if val is not None:
+        line += (f"; validation RMSE {report['rmse_validate_mm']:.4f} mm (mean offset removed "
+                 f"{report['rmse_validate_aligned_mm']:.4f} mm)")
+        for k, b in (report.get("baselines") or {}).items():
+            line += f"; {k} baseline {b['rmse_validate_mm']:.4f} mm"
+    print(line)
     if not args.quiet:
         print(f"wrote {out / 'report.json'}, {out / 'report.md'} and {len(report['plots'])} plots")
 
 
-def _out_dir(path: str) -> Path:
+def _out_dir(path: str, names=(), force: bool = False) -> Path:
+    """A report folder, checked before any work: not a file, writable (or creatable: its nearest
+    existing parent is a writable folder; nothing is created here), and holding none of ``names``
+    unless ``force``."""
+    import os
+
     out = Path(path)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out must be a folder, {str(out)!r} is a file")
+    old = [n for n in names if (out / n).exists()]
+    if old and not force:
+        raise CLIError(f"--out {str(out)!r} already holds a report ({old[0]}); pass --force to replace it "
+                       "or choose another folder")
+    parent = out
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise CLIError(f"--out {str(out)!r} cannot be created: {str(parent)!r} is a file")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise CLIError(f"--out {str(out)!r} is not writable ({str(parent)!r} is read-only)")
     return out
 
 
-def _calibrate_opencr(args) -> None:
-    """A multi-segment robot from OpenCR recordings (``tension_zones.robot_calib``)."""
-    from .model._robot import Robot
-    from .opencr import read_opencr
-    from .robot_calib import CANDIDATES, calibrate_robot, write_report
-    from .robot_fit import effect_names
+def cmd_examples(args) -> None:
+    """List the example files that ship with the package, or copy them into a folder."""
+    from ._examples import EXAMPLES, copy_examples, list_examples
 
-    for flag, given in (("--holdout", args.holdout is not None), ("--robust", args.robust),
-                        ("--drop-bad", args.drop_bad)):
-        if given:
-            raise CLIError(f"{flag} goes with --format model (opencr holds out every 4th pattern group "
-                           "of the training file, and bad rows are errors)")
-    robot = Robot.from_json(args.design)
-    cands = CANDIDATES if args.effects is None else tuple(e.strip() for e in args.effects.split(",")
-                                                          if e.strip())
-    unknown = [e for e in cands if e not in effect_names(robot) or e == "base"]
-    if unknown:
-        known = [e for e in effect_names(robot) if e != "base"]
-        raise CLIError(f"--effects: unknown effect {unknown[0]!r}; known: {', '.join(known)}")
-    train = read_opencr(args.data, n_wires=robot.n_wires)
-    val = None if args.validate is None else read_opencr(args.validate, servo_ids=train.servo_ids,
-                                                        n_wires=robot.n_wires)
-    out = _out_dir(args.out)
-    log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
-    report = calibrate_robot(robot, train, val, candidates=cands, log=log)
-    report.update(data=str(args.data), validate=args.validate, design=str(args.design))
-    report = write_report(report, out)
-    found = ", ".join(e["name"] for e in report["effects"]) or "none"
-    line = (f"held-out train RMSE: declared {report['rmse_declared_mm']:.2f} mm, base fit "
-            f"{report['rmse_before_mm']:.2f} mm, after {report['rmse_after_mm']:.2f} mm; effects added: {found}")
-    if val is not None:
-        line += (f"; validate RMSE {report['rmse_validate_mm']:.2f} mm, mean offset removed "
-                 f"{report['rmse_validate_aligned_mm']:.2f} mm")
-        for k, b in (report.get("baselines") or {}).items():
-            line += f"; {k} baseline {b['rmse_validate_mm']:.2f} mm"
-    print(line)
+    if args.copy is None:
+        print(f"example files in {EXAMPLES} (copy them with --copy DIR):")
+        for name in list_examples():
+            print(f"  {name}")
+        return
+    paths = copy_examples(args.copy, force=args.force)
     if not args.quiet:
-        print(f"wrote {out / 'report.json'}, {out / 'report.md'}" +
-              (f" and {report['plots'][0]}" if report["plots"] else ""))
+        print(f"copied {len(paths)} example files into {args.copy}")
+
+
+def _add_examples_parser(sub) -> None:
+    e = sub.add_parser("examples", help="list the example files that ship with the package, or copy them")
+    e.add_argument("--copy", metavar="DIR", help="copy every example file into DIR (keeping sub-folders)")
+    e.add_argument("--force", action="store_true", help="replace example files already in DIR")
+    e.add_argument("--quiet", action="store_true", help="no summary line")
+    e.set_defaults(func=cmd_examples)
 
 
 def _add_calibrate_parser(sub) -> None:
-    c = sub.add_parser("calibrate", help="fit a design to tracker data, find and add missing effects")
-    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6, or the OpenCR format)")
+    c = sub.add_parser("calibrate", help="fit a robot to tracker data, find and add missing effects")
+    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6, or the OpenCR format with --format opencr)")
     c.add_argument("--design", required=True,
-                   help="declared design JSON (one segment, or {\"segments\": [...]} with --format opencr)")
+                   help="design JSON: one segment, or {\"segments\": [...]} for several")
     c.add_argument("--out", required=True, help="output folder (report.json, report.md, plots)")
     c.add_argument("--format", choices=("model", "opencr"), default="model",
-                   help="model: MODEL.md Sec. 6 (default); opencr: the OpenCR lab's servo_<id>_mm columns")
-    c.add_argument("--validate", help="(opencr) a second recording, only evaluated on")
-    c.add_argument("--effects", help="(opencr) candidate effects in the order tried, comma-separated "
-                                     "(default: every effect of robot_fit, gravity last)")
+                   help="the data files' reader: model (MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
+                        "servo_<id>_mm recordings)")
+    c.add_argument("--validate", help="a second recording of the same robot, only predicted after the selection")
+    c.add_argument("--effects", help="candidate effects, comma-separated (default: the whole library)")
     c.add_argument("--holdout", type=float, default=None,
-                   help="(model) fraction held out at the end of the acquisition order (default 0.25)")
-    c.add_argument("--robust", action="store_true", help="(model) Huber loss (tracker glitches)")
+                   help="fraction held out for the decisions (default 0.25: the tail of the acquisition "
+                        "order, or every 4th pattern group of a labelled recording)")
+    c.add_argument("--robust", action="store_true", help="Huber loss (tracker glitches)")
     c.add_argument("--drop-bad", action="store_true",
-                   help="(model) drop isolated bad rows (counted in the report) instead of failing")
+                   help="drop isolated bad rows (listed in the report) instead of failing")
+    c.add_argument("--force", action="store_true", help="replace an existing report in --out")
     c.add_argument("--quiet", action="store_true", help="only the one-line summary")
     c.set_defaults(func=cmd_calibrate)
-# ---- end calibrate ----------------------------------------------------------------------------
+
+
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -336,6 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=cmd_reproduce)
     _add_sweep_parser(sub)  # issue 3
     _add_calibrate_parser(sub)
+    _add_examples_parser(sub)
     return p
 
 
@@ -353,6 +382,11 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print("tension-zones: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # the output was piped into a program that stopped reading (e.g. head)
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
     return 0
 
 

@@ -152,3 +152,240 @@ def write_set(folder, name: str, truth: Truth, n_samples: int = 240, seed: int =
     csv_path.write_text("\n".join(lines) + "\n")
     design_path.write_text(json.dumps(design))
     return csv_path, design_path
+
+
+# =============================================================================================
+# Robots of one or more segments, recorded the way the OpenCR lab records (labelled patterns,
+# servo ids shuffled, an unregistered tracker frame). Own code path again: positions from SciPy's
+# rotations, the weight integrated by Gauss-Legendre quadrature, the load's gradient by finite
+# differences, SciPy's BFGS for the equilibrium, friction as a linear tension factor iterated to a
+# fixed point, path-dependent effects as Python loops.
+# =============================================================================================
+ROBOT = {"segments": [
+    {"length_mm": 45.0, "n_wires": 3, "pitch_radius_mm": 3.5, "wire_angles_deg": [10.0, 130.0, 250.0],
+     "backbone_EI_Nmm2": 1500.0, "wire_stiffness_N_per_mm": 30.0, "preload_N": 0.0},
+    {"length_mm": 70.0, "n_wires": 4, "pitch_radius_mm": 5.0, "wire_angles_deg": [45.0, 135.0, 215.0, 315.0],
+     "backbone_EI_Nmm2": 3000.0, "wire_stiffness_N_per_mm": 80.0, "preload_N": 0.0},
+]}
+
+
+@dataclasses.dataclass
+class RobotTruth:
+    """A robot (a ``{"segments": [...]}`` design) and what its design file does not declare.
+
+    ``pattern_rotation_deg``, ``registration`` and ``EI_factors`` are what tracker recordings always
+    have (the nominal parameters of such data); the rest are effects (all zero = none).
+    """
+
+    design: dict = dataclasses.field(default_factory=lambda: ROBOT)
+    pattern_rotation_deg: tuple = (12.0, -20.0)  # per segment
+    registration_deg: tuple = (1.0, -1.5, 4.0)  # tracker <- base rotation vector
+    translation: tuple = (2.0, -3.0, 5.0)  # mm
+    EI_factors: tuple = (1.2, 0.8)  # per segment
+    play: tuple = ()  # per wire, mm
+    friction: tuple = (0.0, 0.0)  # (routing, per rad of bending): linear tension factor 1 +- (...)
+    angle_offsets_deg: tuple = ()  # per wire
+    stiffness_factors: tuple = ()  # per wire
+    d_preload: tuple = ()  # per wire, N
+    tip_force: tuple = (0.0, 0.0, 0.0)  # N, base frame
+    gravity: tuple = (0.0, 0.0, 0.0)  # N/mm, base frame
+    marker: tuple = (0.0, 0.0, 0.0)  # mm, tip frame
+    d_length: tuple = ()  # per segment, mm
+    d_radius: tuple = ()  # per segment, mm
+    drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
+    noise: float = 0.05
+
+
+def _rodrigues(w):
+    """Rotation matrix of the rotation vector ``w`` (NumPy, axis-angle form)."""
+    th = np.linalg.norm(w)
+    if th < 1e-12:
+        return np.eye(3)
+    k = w / th
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(th) * K + (1.0 - np.cos(th)) * (K @ K)
+
+
+def _arc(L, b, s):
+    """Position and rotation at arc length s of a segment of length L and bending vector b."""
+    u, v = b
+    phi = np.hypot(u, v) * s / L
+    rot = _rodrigues(np.array([-v, u, 0.0]) * s / L)
+    if phi < 1e-9:
+        return np.array([0.0, 0.0, s]), rot
+    sig = np.arctan2(v, u)
+    rho = s / phi
+    return np.array([rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig),
+                     rho * np.sin(phi)]), rot
+
+
+_GL = np.polynomial.legendre.leggauss(8)
+
+
+def _arc_points(L, b, s):
+    """Positions (len(s), 3) at arc lengths ``s`` of a segment (the weight's quadrature points)."""
+    phi = np.hypot(*b) * s / L
+    if np.hypot(*b) < 1e-9:
+        return np.stack([0 * s, 0 * s, s], axis=1)
+    sig = np.arctan2(b[1], b[0])
+    rho = s / phi
+    return np.stack([rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig),
+                     rho * np.sin(phi)], axis=1)
+
+
+class _Robot:
+    """The simulated robot's physical numbers, per segment and per wire."""
+
+    def __init__(self, truth: RobotTruth):
+        segs = truth.design["segments"]
+        self.S = len(segs)
+        self.n = [s["n_wires"] for s in segs]
+        self.N = sum(self.n)
+        self.owner = np.repeat(np.arange(self.S), self.n)
+        per = lambda v, d: np.full(self.N if d == "w" else self.S, 0.0) if len(v) == 0 else np.asarray(v, float)  # noqa: E731
+        self.L = np.array([s["length_mm"] for s in segs]) + per(truth.d_length, "s")
+        r_seg = np.array([s["pitch_radius_mm"] for s in segs])
+        alpha = np.radians(np.concatenate([s["wire_angles_deg"] for s in segs]))
+        self.alpha = alpha + np.radians(np.asarray(truth.pattern_rotation_deg))[self.owner] \
+            + np.radians(per(truth.angle_offsets_deg, "w"))
+        self.radius = r_seg[self.owner][:, None] + per(truth.d_radius, "s")[None, :]  # (N, S): wire k in segment j
+        self.EI = np.array([s["backbone_EI_Nmm2"] for s in segs]) * np.asarray(truth.EI_factors, float)
+        k0 = np.array([s["wire_stiffness_N_per_mm"] for s in segs])[self.owner]
+        self.k = k0 * (per(truth.stiffness_factors, "w") if len(truth.stiffness_factors) else 1.0)
+        self.pre = np.array([s["preload_N"] for s in segs])[self.owner] + per(truth.d_preload, "w")
+        self.f = np.asarray(truth.tip_force, float)
+        self.g = np.asarray(truth.gravity, float)
+        self.mu = np.asarray(truth.friction, float)
+        # wire length changes are linear in the bending vectors: dl = A x (own assembly of the rows)
+        self.A = np.zeros((self.N, 2 * self.S))
+        for k in range(self.N):
+            for j in range(self.owner[k] + 1):
+                self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(self.alpha[k]), np.sin(self.alpha[k])])
+        self.loaded = bool(np.any(self.f) or np.any(self.g))
+
+
+    def chain(self, B):
+        """Disk poses along the chain (lists of S + 1) and the weight's quadrature points."""
+        p, R = np.zeros(3), np.eye(3)
+        ps, Rs, pts, wts = [p], [R], [], []
+        for j in range(self.S):
+            s = 0.5 * self.L[j] * (_GL[0] + 1.0)
+            pts.append(p + _arc_points(self.L[j], B[j], s) @ R.T)
+            wts.append(0.5 * self.L[j] * _GL[1])
+            pj, Rj = _arc(self.L[j], B[j], self.L[j])
+            p, R = p + R @ pj, R @ Rj
+            ps.append(p)
+            Rs.append(R)
+        return ps, Rs, np.concatenate(pts), np.concatenate(wts)
+
+    def load(self, x):
+        ps, _, pts, wts = self.chain(x.reshape(self.S, 2))
+        return -self.f @ ps[-1] - self.g @ (wts @ pts)
+
+    def energy(self, x, q, t):
+        s = self.A @ x - q + self.pre / self.k
+        E = np.repeat(self.EI / self.L, 2)
+        V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2)
+        g = E * x + self.A.T @ (t * self.k * np.maximum(s, 0.0))
+        if self.loaded:
+            V += self.load(x)
+            h = 1e-6
+            g = g + np.array([(self.load(x + h * e) - self.load(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+        return V, g
+
+    def equilibrium(self, q, direction, x0):
+        t = np.ones(self.N)
+        x = x0
+        for _ in range(30):  # friction: a fixed point of the tension factor and the bending
+            res = minimize(lambda y: self.energy(y, q, t), x, jac=True, method="BFGS", options={"gtol": 1e-10})
+            x = res.x
+            wrap = np.array([sum(np.hypot(*x.reshape(self.S, 2)[j]) for j in range(self.owner[k] + 1))
+                             for k in range(self.N)])
+            t_new = 1.0 + direction * (self.mu[0] + self.mu[1] * wrap)
+            if np.max(np.abs(t_new - t)) < 1e-10:
+                break
+            t = t_new
+        return x
+
+
+def robot_patterns(design: dict, rng, val: bool = False, servos=None, steps: int = 10):
+    """(label, Q block) pairs, MODEL.md sign (negative = pulled in), commands from the *declared*
+    kinematics: training = single-wire pulls (the others paid out) and each segment bent out and
+    back in six directions, each ending in a hold (repeated commands); validation = every segment
+    bent together, each in its own direction."""
+    from tension_zones.model import Robot
+
+    robot = Robot.from_dict(design)
+    Jq = np.asarray(robot.J_qB())
+    S, N = robot.n_segments, robot.n_wires
+    t = np.r_[np.linspace(0.0, 1.0, steps), np.linspace(1.0, 0.0, steps)[1:]][:, None]
+    out = []
+    if not val:
+        for k in range(N):
+            q = np.full((len(t), N), 0.8)
+            q[:, k] = -2.0 * t[:, 0]
+            out.append((f"rep1_tendon{k}_id{servos[k]}_pull", np.r_[q, q[-1:].repeat(3, 0)]))
+    for d in range(0, 360, 60):
+        for j in ([None] if val else range(S)):
+            B = np.zeros((len(t), S, 2))
+            for jj in (range(S) if j is None else [j]):
+                a = np.radians(d + 100 * jj)
+                B[:, jj] = 0.45 * t * np.array([np.cos(a), np.sin(a)])
+            q = B.reshape(len(t), -1) @ Jq.T + 0.05 * rng.normal(size=(len(t), N))
+            out.append((f"rep1_{'all' if val else f'seg{j}'}_dir{d}", np.r_[q, q[-1:].repeat(3, 0)]))
+    return out
+
+
+def simulate_robot(truth: RobotTruth, patterns, seed: int = 0):
+    """Measured tip positions (T, 3) in the tracker frame for the patterns' commands, in order."""
+    rng = np.random.default_rng(seed)
+    rob = _Robot(truth)
+    Q = np.concatenate([q for _, q in patterns])
+    play = np.zeros(rob.N) if len(truth.play) == 0 else np.asarray(truth.play, float)
+    R_reg = Rotation.from_rotvec(np.radians(truth.registration_deg))
+    q_eff, last_dir, x = Q[0].copy(), np.zeros(rob.N), np.zeros(2 * rob.S)
+    P = np.empty((len(Q), 3))
+    for i in range(len(Q)):
+        if i > 0:
+            dq = Q[i] - Q[i - 1]
+            last_dir = np.where(dq > 0, 1.0, np.where(dq < 0, -1.0, last_dir))
+        for k in range(rob.N):  # play
+            if Q[i, k] > q_eff[k] + play[k] / 2:
+                q_eff[k] = Q[i, k] - play[k] / 2
+            elif Q[i, k] < q_eff[k] - play[k] / 2:
+                q_eff[k] = Q[i, k] + play[k] / 2
+        x = rob.equilibrium(q_eff, last_dir, x)
+        ps, Rs, _, _ = rob.chain(x.reshape(rob.S, 2))
+        P[i] = R_reg.apply(ps[-1] + Rs[-1] @ np.asarray(truth.marker, float)) + np.asarray(truth.translation)
+    s = np.arange(len(Q)) / len(Q)
+    P[:, 0] += truth.drift_mm * np.sin(2 * np.pi * 1.5 * s)
+    P[:, 2] += truth.drift_mm * np.cos(2 * np.pi * 1.5 * s)
+    return P + rng.normal(0.0, truth.noise, P.shape)
+
+
+def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bool = True):
+    """``NAME_train.csv`` (and ``NAME_val.csv``) in the OpenCR format, servo columns in id order
+    with servo ids shuffled against the tendons, and ``NAME.design.json`` (the declared design).
+    Returns the paths ``(train, val or None, design)``."""
+    folder = Path(folder)
+    rng = np.random.default_rng(seed)
+    N = sum(s["n_wires"] for s in truth.design["segments"])
+    servos = [int(s) for s in rng.permutation(N) + 1]  # servo driving each tendon
+
+    def write(path, pats, t0):
+        P = simulate_robot(truth, pats, seed=int(rng.integers(1 << 30)))
+        Q = np.concatenate([q for _, q in pats])
+        labels = [lab for lab, q in pats for _ in range(len(q))]
+        order = sorted(servos)
+        lines = ["timestamp,pattern_label," + ",".join(f"servo_{s}_mm" for s in order) + ",tip_x,tip_y,tip_z"]
+        for i, (lab, q, p) in enumerate(zip(labels, Q, P)):
+            vals = [-q[servos.index(s)] for s in order] + list(p)  # the lab's sign: positive = pulled in
+            lines.append(f"{t0 + 0.5 * i:.2f},{lab}," + ",".join(f"{v:.6f}" for v in vals))
+        path.write_text("\n".join(lines) + "\n")
+        return path
+
+    train = write(folder / f"{name}_train.csv", robot_patterns(truth.design, rng, servos=servos), 100.0)
+    v = write(folder / f"{name}_val.csv", robot_patterns(truth.design, rng, val=True), 5000.0) if val else None
+    design = folder / f"{name}.design.json"
+    design.write_text(json.dumps(truth.design))
+    return train, v, design

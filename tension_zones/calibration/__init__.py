@@ -1,21 +1,22 @@
-"""Closing the loop with measured data (issue 6): forward model, calibration, residual diagnosis.
+"""Closing the loop with measured data, for any robot (one segment or many).
 
-* :mod:`.forward` - the kinetostatic single-segment model (MODEL.md Sec. 5), implicit derivatives;
-* :mod:`.data` - measurement sets (MODEL.md Sec. 6) with validation;
+* :mod:`._data` - one :class:`Dataset`, readers for the MODEL.md CSV and the OpenCR CSV;
 * :mod:`.effects` - the effect library (one module per effect);
-* :mod:`.model` - a model plus effects as one parameter vector; bounded robust Levenberg-Marquardt;
-* :mod:`.diagnose` - noise floor, structure tests, score tests;
-* :mod:`.loop` - :func:`calibrate`; :mod:`.report` - report.json / report.md / plots.
+* :mod:`._model` - the robot as the loop sees it; :mod:`._problem` - a model plus effects as one
+  parameter vector, fitted by the package's least-squares solver, compiled once;
+* :mod:`._diagnose` - noise floor, structure tests, score tests;
+* :mod:`._loop` - :func:`calibrate`; :mod:`._report` - report.json / report.md / plots;
+  :mod:`._baselines` - black-box baselines for the report.
 """
 
-from .data import DataError, Dataset, load_csv
-from .diagnose import noise_floor, score_test, structure_test
-from .effects import LIBRARY, NOMINAL, Effect
-from .forward import SegmentModel, equilibrium, motion_direction, tip_position
-from .loop import Result, calibrate
-from .model import Problem
-from .report import write_report
+from ._data import READERS, DataError, Dataset, load_data, read_csv, read_opencr
+from ._diagnose import noise_floor, score_test, structure_test
+from ._loop import Result, calibrate, predict_report, rmse, rmse_aligned
+from ._model import RobotModel, motion_direction
+from ._problem import Problem, compilations
+from ._report import write_report
+from .effects import Effect
 
-__all__ = ["LIBRARY", "NOMINAL", "DataError", "Dataset", "Effect", "Problem", "Result", "SegmentModel",
-           "calibrate", "equilibrium", "load_csv", "motion_direction", "noise_floor", "score_test",
-           "structure_test", "tip_position", "write_report"]
+__all__ = ["READERS", "DataError", "Dataset", "Effect", "Problem", "Result", "RobotModel", "calibrate",
+           "compilations", "load_data", "motion_direction", "noise_floor", "predict_report", "read_csv", "read_opencr", "rmse",
+           "rmse_aligned", "score_test", "structure_test", "write_report"]

@@ -49,3 +49,13 @@ from ._zones import (
     tension_mask,
     tension_score,
 )
+from ._equilibrium import (
+    Load,
+    energy,
+    equilibrium,
+    equilibrium_J_pq,
+    forward,
+    wire_stretch,
+    wire_tensions,
+)
+from ._robot import Robot, Structure

@@ -157,16 +157,58 @@ def tip_pose_b(design: Design, b):
     """Tip position (3,) and orientation (3, 3) from the bending vector ``b = (u, v)`` (rad).
 
     ``p = [L (1 - cos phi)/phi^2 u, L (1 - cos phi)/phi^2 v, L sin(phi)/phi]``, ``phi = |b|``;
-    rotation vector ``(-v, u, 0)``. Smooth at ``b = 0``.
+    rotation vector ``(-v, u, 0)``. Smooth at ``b = 0``. (:func:`segment_pose` of the design's length.)
     """
     (b,) = _as_float(design, b)
+    return segment_pose(design.length, b)
+
+
+def segment_pose(L, b):
+    """End-disk position (3,) and rotation (3, 3) of a constant-curvature segment of length ``L`` (mm)
+    and bending vector ``b`` (2,), in the segment's base frame (MODEL.md Sec. 5).
+
+    The one formula of a segment's pose: :func:`tip_pose_b` and a robot's chain of segments use it.
+    """
     u, v = b[0], b[1]
     phi2 = u * u + v * v
-    L = design.length
     k = L * versinc_sq(phi2)
     p = jnp.stack([k * u, k * v, L * sinc_sq(phi2)])
     R = rotvec_to_matrix(jnp.stack([-v, u, jnp.zeros_like(u)]))
     return p, R
+
+
+def segment_weight_moment(L, b):
+    """``int_0^L p(s) ds`` (3,), mm^2: the first moment of a constant-curvature segment's backbone in its
+    base frame, for a load distributed uniformly along it (self-weight).
+
+    The point at arc length ``s`` has bending vector ``b s / L``; integrating :func:`segment_pose`'s
+    position gives ``L^2 [g u, g v, c]`` with ``g = (phi - sin phi)/phi^3``, ``c = (1 - cos phi)/phi^2``
+    (finite at ``b = 0``: ``L^2 [0, 0, 1/2]``, a straight rod's centroid at ``L/2`` times ``L``).
+    """
+    u, v = b[0], b[1]
+    phi2 = u * u + v * v
+    g = sinc_comp_sq(phi2)
+    return L * L * jnp.stack([g * u, g * v, versinc_sq(phi2)])
+
+
+def segment_weight_moment_jacobian(L, b):
+    """``d (int_0^L p ds) / d b`` (3, 2) of :func:`segment_weight_moment`, in closed form: with
+    ``x = |b|^2`` and ``'`` = ``d/dx``, columns ``L^2 [g + 2u^2 g', 2uv g', 2u c']`` and
+    ``L^2 [2uv g', g + 2v^2 g', 2v c']``."""
+    u, v = b[0], b[1]
+    x2 = u * u + v * v
+    g, g1 = with_derivatives(sinc_comp_sq, x2)
+    _, c1 = with_derivatives(versinc_sq, x2)
+    L2 = L * L
+    du = jnp.stack([g + 2 * u * u * g1, 2 * u * v * g1, 2 * u * c1])
+    dv = jnp.stack([2 * u * v * g1, g + 2 * v * v * g1, 2 * v * c1])
+    return L2 * jnp.stack([du, dv], axis=1)
+
+
+def moment_arms(radius, angles):
+    """``d l / d b`` of wires at ``angles`` (rad) on a pitch circle of ``radius`` (mm): ``-r [cos a, sin a]``,
+    shape ``angles.shape + (2,)``. Wire lengths are linear in ``b`` (MODEL.md Sec. 5)."""
+    return -jnp.asarray(radius)[..., None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
 
 
 def wire_lengths_b(design: Design, b):
@@ -179,8 +221,7 @@ def wire_lengths_b(design: Design, b):
 
 def J_qb(design: Design, b=None):
     """``q_dot = J_qb b_dot``, (n, 2): the constant ``-r [cos alpha_k, sin alpha_k]``."""
-    a = design.wire_angles
-    return -design.pitch_radius * jnp.stack([jnp.cos(a), jnp.sin(a)], axis=1)
+    return moment_arms(design.pitch_radius, design.wire_angles)
 
 
 def bend_coeffs(x2, second=False):
@@ -219,8 +260,13 @@ def J_xb(design: Design, b):
     ``omega_u = (-g uv, 1 - g v^2, -c v)``, ``omega_v = (-1 + g u^2, g uv, c u)``.
     """
     (b,) = _as_float(design, b)
+    return segment_J_xb(design.length, b)
+
+
+def segment_J_xb(L, b):
+    """:func:`J_xb` of a segment of length ``L`` (6, 2), in its base frame (used by a robot's chain)."""
     u, v = b[0], b[1]
-    du, dv = J_xb_cols(design.length, u, v, bend_coeffs(u * u + v * v))
+    du, dv = J_xb_cols(L, u, v, bend_coeffs(u * u + v * v))
     return jnp.stack([jnp.stack(du), jnp.stack(dv)], axis=1)
 
 

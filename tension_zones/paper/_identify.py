@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._lsq import levenberg_marquardt
 from ..model._design import Design
 from ..model._kinematics import over_grid
 from ..model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, compliance_pose
@@ -86,39 +87,14 @@ def _residuals(log_params, target):
     return model_means(log_params) / target - 1.0
 
 
-def residuals_and_jacobian(fun):
-    """``x -> (fun(x), d fun / dx)`` from one forward-mode pass (one compilation for both)."""
-    jac = jax.jacfwd(lambda x, *a: (fun(x, *a), fun(x, *a)), has_aux=True)
-    return jax.jit(lambda x, *a: jac(x, *a)[::-1])
-
-
-_res_jac = residuals_and_jacobian(_residuals)  # forward mode: 3 parameters
-
-
-def levenberg_marquardt(res_jac, x0, *args, maxiter: int = 50, tol: float = 1e-12):
-    """Levenberg-Marquardt (Marquardt's diagonal scaling) on compiled residuals and Jacobian.
-
-    ``res_jac(x, *args) -> (r, J)``. A step whose residuals are not finite (e.g. a parameter set
-    where some workspace pose loses stability and its deflection is flagged NaN) is rejected like
-    any step that does not descend. Returns ``(x, n_accepted_steps)``.
-    """
-    x = jnp.asarray(x0)
-    r, J = res_jac(x, *args)
-    cost, mu, accepted = float(r @ r), 1e-3, 0
-    for _ in range(maxiter):
-        H, g = J.T @ J, J.T @ r
-        step = jnp.linalg.solve(H + mu * jnp.diag(jnp.diag(H)), -g)
-        r_new, J_new = res_jac(x + step, *args)
-        cost_new = float(r_new @ r_new)
-        if np.isfinite(cost_new) and cost_new < cost:
-            x, r, J, cost, mu, accepted = x + step, r_new, J_new, cost_new, mu / 3.0, accepted + 1
-            if float(jnp.max(jnp.abs(step))) < tol or float(jnp.max(jnp.abs(J.T @ r))) < tol:
-                break
-        else:
-            mu *= 4.0
-            if mu > 1e12:
-                break
-    return x, accepted
+@jax.jit
+def _fit(init, target, maxiter):
+    """The package's least-squares solver (:func:`tension_zones._lsq.levenberg_marquardt`) on the twelve
+    relative errors, in log-parameters; a step whose residuals are not finite (some workspace pose
+    loses stability and its deflection is flagged NaN) is rejected like any step that does not descend."""
+    theta, _, iterations, r, _ = levenberg_marquardt(lambda p: _residuals(p, target), init, max_iter=maxiter,
+                                                     tol=1e-14)
+    return theta, iterations, r[:, 0]
 
 
 def identify(initial=None, maxiter: int = 50):
@@ -141,14 +117,14 @@ def identify(initial=None, maxiter: int = 50):
                 f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}"
             )
         init = np.log(start)
-        p, its = levenberg_marquardt(_res_jac, init, target, maxiter=maxiter)
-        r = np.asarray(_res_jac(p, target)[0])
+        p, its, r = _fit(jnp.asarray(init), target, maxiter)
+        p, its, r = np.asarray(p), int(its), np.asarray(r)
         if np.all(np.isfinite(r)) and (best is None or r @ r < best[2]):
             best = (p, its, float(r @ r))
     if best is None:
         raise ValueError("the identification found no parameter set with a stable workspace")
     p, its, _ = best
-    err = np.asarray(_res_jac(p, target)[0])
+    err = np.asarray(_residuals(jnp.asarray(p), target))
     L, r, EI = (float(x) for x in np.exp(np.asarray(p)))
     return {
         "length_mm": L,

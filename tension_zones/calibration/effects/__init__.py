@@ -9,17 +9,33 @@ from .backbone import BackboneEI
 from .backlash import Backlash, play
 from .friction import Friction
 from .geometry import Geometry
+from .gravity import Gravity
+from .marker import Marker
+from .pattern_rotation import PatternRotation
 from .preload import Preload
 from .registration import Registration
 from .tip_force import TipForce
 from .wire_angle_offset import WireAngleOffset
 from .wire_stiffness import WireStiffness
 
-#: Always fitted (the identifiable nominal parameters of the single-segment model).
-NOMINAL = (BackboneEI(),)
-#: Candidate effects, in the order they are listed in reports.
-LIBRARY = (Backlash(), Friction(), WireAngleOffset(), WireStiffness(), Preload(), TipForce(),
-           Registration(), Geometry())
+#: Every effect, in the order reports list them.
+ALL = (BackboneEI(), PatternRotation(), Registration(), Backlash(), Friction(), WireAngleOffset(),
+       WireStiffness(), Preload(), TipForce(), Gravity(), Marker(), Geometry())
+#: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
+#: in an unregistered tracker frame where which way each segment's wires point is unknown too.
+NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "registration")}
+BY_NAME = {e.name: e for e in ALL}
 
-__all__ = ["LIBRARY", "NOMINAL", "BackboneEI", "Backlash", "Effect", "Friction", "Geometry", "Preload",
-           "Registration", "TipForce", "WireAngleOffset", "WireStiffness", "play"]
+
+def library(frame: str = "base") -> tuple[Effect, ...]:
+    """The candidate effects for data in ``frame``: every effect that is not nominal there."""
+    return tuple(e for e in ALL if e.name not in NOMINAL[frame])
+
+
+def nominal(frame: str = "base") -> tuple[Effect, ...]:
+    return tuple(BY_NAME[n] for n in NOMINAL[frame])
+
+
+__all__ = ["ALL", "BY_NAME", "NOMINAL", "BackboneEI", "Backlash", "Effect", "Friction", "Geometry", "Gravity",
+           "Marker", "PatternRotation", "Preload", "Registration", "TipForce", "WireAngleOffset", "WireStiffness",
+           "library", "nominal", "play"]

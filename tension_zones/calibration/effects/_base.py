@@ -1,63 +1,80 @@
-"""What an effect is: a few parameters and a transformation of the model's params, inputs or outputs.
+"""What an effect is: a few parameters and a transformation of the model's parameters, inputs or outputs.
 
 An effect never branches on values and is written for the whole batch (inputs have the sample axis
-first), so the loop can compile one model with every effect present and switch effects on and off
-with a mask: adding an effect to a fit never recompiles. ``null`` parameters mean "no effect"; the
-score test differentiates at the null.
+first), so the loop compiles one model with every effect present and switches effects on and off with
+a mask: adding, removing or refitting an effect never recompiles. ``null`` parameters mean "no
+effect"; the score test differentiates there. Every effect is defined for any robot: per wire, per
+segment or global, as its physics says (``model.structure`` has the wire counts; wires are numbered
+segment by segment, proximal first).
+
+Hooks (traced): ``on_params(theta, phys, model, on)`` changes the physical parameters (the dict of
+:meth:`~tension_zones.model.Robot.params`), ``on_inputs(theta, inputs, model, on)`` the per-sample
+inputs (``q``, ``f``, ``direction``, ``reset``), ``on_outputs(theta, out, model, on)`` the predicted tip
+(``out["p"]`` (N, 3) in the measurement frame, ``out["R"]`` (N, 3, 3)). ``on`` maps every effect's name
+to a traced 0/1: whether it is part of the model being evaluated (for an effect whose parameters
+overlap another's, e.g. per-wire angles and a per-segment rotation of the pattern).
 """
 
 from __future__ import annotations
 
 import dataclasses
 
+import jax.numpy as jnp
 import numpy as np
 
 
 @dataclasses.dataclass(frozen=True)
 class Effect:
-    """Base class: subclasses set ``name`` and override ``size`` and one of the three hooks."""
+    """Base class: subclasses set ``name`` and ``doc`` and override ``size`` and the hooks they need."""
 
     name = "effect"
     #: one line for the report: what the effect is physically
     doc = ""
 
-    # -- parameters (concrete NumPy, read once from the declared physical parameters) --------------
-    def size(self, phys0) -> int:
+    # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
+    def size(self, model, phys0) -> int:
         raise NotImplementedError
 
-    def null(self, phys0) -> np.ndarray:
-        return np.zeros(self.size(phys0))
+    def null(self, model, phys0) -> np.ndarray:
+        return np.zeros(self.size(model, phys0))
 
-    def bounds(self, phys0) -> tuple[np.ndarray, np.ndarray]:
-        n = self.size(phys0)
+    def bounds(self, model, phys0) -> tuple[np.ndarray, np.ndarray]:
+        n = self.size(model, phys0)
         return np.full(n, -np.inf), np.full(n, np.inf)
 
-    def labels(self, phys0) -> list[str]:
+    def labels(self, model, phys0) -> list[str]:
         """One name (with unit) per parameter, for the report."""
-        n = self.size(phys0)
-        return [f"{self.name}[{i}]" for i in range(n)]
+        return [f"{self.name}[{i}]" for i in range(self.size(model, phys0))]
 
-    def report_values(self, theta, phys0) -> np.ndarray:
-        """Parameters in the units of :meth:`labels` (default: as fitted)."""
+    def report_values(self, theta, model, phys0) -> np.ndarray:
+        """Parameters in the units of :meth:`labels` (default: as fitted). Elementwise in ``theta``."""
         return np.asarray(theta, float)
 
     # -- hooks (traced; theta is this effect's slice of the parameter vector) ---------------------
-    def on_params(self, theta, phys):
+    def on_params(self, theta, phys, model, on):
         return phys
 
-    def on_inputs(self, theta, inputs):
+    def on_inputs(self, theta, inputs, model, on):
         return inputs
 
-    def on_outputs(self, theta, pos):
-        return pos
+    def on_outputs(self, theta, out, model, on):
+        return out
 
 
-def n_wires(phys0) -> int:
-    return int(np.shape(phys0["wire_angles"])[0])
+def wire_labels(prefix: str, unit: str, model) -> list[str]:
+    return [f"{prefix}_{k + 1}_{unit}" for k in range(model.structure.n_wires)]
 
 
-def wire_labels(prefix: str, unit: str, phys0) -> list[str]:
-    return [f"{prefix}_{k + 1}_{unit}" for k in range(n_wires(phys0))]
+def segment_labels(prefix: str, unit: str, model) -> list[str]:
+    S = model.structure.n_segments
+    return [f"{prefix}_{unit}"] if S == 1 else [f"{prefix}_{j + 1}_{unit}" for j in range(S)]
+
+
+def segment_pitch_radii(model, phys0) -> np.ndarray:
+    """(S,) each segment's pitch radius: the mean radius of its own wires in it."""
+    st = model.structure
+    rr = np.asarray(phys0["route_radii"])
+    return np.array([rr[st.owner == j, j].mean() for j in range(st.n_segments)])
 
 
 def replace(d: dict, **changes) -> dict:
@@ -65,3 +82,7 @@ def replace(d: dict, **changes) -> dict:
     out.update(changes)
     return out
 
+
+def per_owner(model, values):
+    """A per-segment array (S,) as each wire's value (N,) (its owner segment's)."""
+    return jnp.asarray(values)[model.structure.owner]

@@ -1,8 +1,8 @@
-"""Nominal parameter: the backbone's bending stiffness ``EI`` (always fitted, never a candidate).
+"""Backbone bending stiffness ``EI`` of each segment (a log factor on the declared value).
 
-Fitted as a log factor on the declared value: it is the least certain number of a design (a nitinol
-rod's modulus spans 40-75 GPa) and, with the wire stiffness fixed, it sets how far the backbone
-resists the wires (the ratio ``EI / (L k r^2)``), which every sample sees.
+Nominal (always fitted): it is the least certain number of a design (a nitinol rod's modulus spans
+40-75 GPa) and, with the wire stiffness fixed, it sets how far the backbone resists the wires (the
+ratio ``EI / (L k r^2)``), which every sample sees.
 """
 
 import dataclasses
@@ -10,25 +10,26 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ._base import Effect, replace
+from ._base import Effect, replace, segment_labels
 
 
 @dataclasses.dataclass(frozen=True)
 class BackboneEI(Effect):
     name = "backbone_EI"
-    doc = "backbone bending stiffness EI (log factor on the declared value)"
+    doc = "backbone bending stiffness EI of each segment (log factor on the declared value)"
 
-    def size(self, phys0):
-        return 1
+    def size(self, model, phys0):
+        return model.structure.n_segments
 
-    def bounds(self, phys0):
-        return np.array([-np.log(20.0)]), np.array([np.log(20.0)])
+    def bounds(self, model, phys0):
+        n = self.size(model, phys0)
+        return np.full(n, -np.log(20.0)), np.full(n, np.log(20.0))
 
-    def labels(self, phys0):
-        return ["EI_Nmm2"]
+    def labels(self, model, phys0):
+        return segment_labels("EI", "Nmm2", model)
 
-    def report_values(self, theta, phys0):
-        return float(phys0["EI"]) * np.exp(np.asarray(theta, float))
+    def report_values(self, theta, model, phys0):
+        return np.asarray(phys0["EI"], float) * np.exp(np.asarray(theta, float))
 
-    def on_params(self, theta, phys):
-        return replace(phys, EI=phys["EI"] * jnp.exp(theta[0]))
+    def on_params(self, theta, phys, model, on):
+        return replace(phys, EI=phys["EI"] * jnp.exp(theta))

@@ -1,33 +1,34 @@
-"""Per-wire preload error ``f_pre,k = f_pre + d_k`` (N).
+"""Per-wire preload (N) on top of the declared one: wire zero offsets and pretension.
 
-A preload difference between wires is the same as a zero offset of that wire's displacement
-(``d_k / k``), so this effect also covers encoder zero errors.
+A preload ``f`` is the same as a zero offset ``f / k_w`` of the wire's displacement (MODEL.md Sec. 5:
+``s = dl - q + f_pre / k_w``), so this effect also covers encoder zero errors and a segment's
+pretension.
 """
 
 import dataclasses
 
 import numpy as np
 
-from ._base import Effect, n_wires, replace, wire_labels
+from ._base import Effect, replace, wire_labels
 
 
 @dataclasses.dataclass(frozen=True)
 class Preload(Effect):
     name = "preload"
-    doc = "preload of each wire (N)"
+    doc = "preload of each wire (N), equivalently a zero offset of its displacement"
 
-    def size(self, phys0):
-        return n_wires(phys0)
+    def size(self, model, phys0):
+        return model.structure.n_wires
 
-    def bounds(self, phys0):
-        n = n_wires(phys0)
-        return np.full(n, -20.0), np.full(n, 20.0)
+    def bounds(self, model, phys0):
+        lim = 3.0 * np.asarray(phys0["wire_stiffness"], float)  # 3 mm of wire
+        return -lim, lim
 
-    def labels(self, phys0):
-        return wire_labels("preload", "N", phys0)
+    def labels(self, model, phys0):
+        return wire_labels("preload", "N", model)
 
-    def report_values(self, theta, phys0):
+    def report_values(self, theta, model, phys0):
         return np.asarray(phys0["preload"], float) + np.asarray(theta, float)
 
-    def on_params(self, theta, phys):
+    def on_params(self, theta, phys, model, on):
         return replace(phys, preload=phys["preload"] + theta)

@@ -12,14 +12,14 @@ class TipForce(Effect):
     name = "tip_force"
     doc = "constant unknown tip force (N, base frame)"
 
-    def size(self, phys0):
+    def size(self, model, phys0):
         return 3
 
-    def bounds(self, phys0):
+    def bounds(self, model, phys0):
         return np.full(3, -20.0), np.full(3, 20.0)
 
-    def labels(self, phys0):
+    def labels(self, model, phys0):
         return ["fx_N", "fy_N", "fz_N"]
 
-    def on_inputs(self, theta, inputs):
+    def on_inputs(self, theta, inputs, model, on):
         return replace(inputs, f=inputs["f"] + theta)

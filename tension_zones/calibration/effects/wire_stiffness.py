@@ -5,7 +5,7 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ._base import Effect, n_wires, replace, wire_labels
+from ._base import Effect, replace, wire_labels
 
 
 @dataclasses.dataclass(frozen=True)
@@ -13,18 +13,18 @@ class WireStiffness(Effect):
     name = "wire_stiffness"
     doc = "axial stiffness of each wire (N/mm)"
 
-    def size(self, phys0):
-        return n_wires(phys0)
+    def size(self, model, phys0):
+        return model.structure.n_wires
 
-    def bounds(self, phys0):
-        n = n_wires(phys0)
+    def bounds(self, model, phys0):
+        n = self.size(model, phys0)
         return np.full(n, -np.log(10.0)), np.full(n, np.log(10.0))
 
-    def labels(self, phys0):
-        return wire_labels("stiffness", "N_per_mm", phys0)
+    def labels(self, model, phys0):
+        return wire_labels("stiffness", "N_per_mm", model)
 
-    def report_values(self, theta, phys0):
+    def report_values(self, theta, model, phys0):
         return np.asarray(phys0["wire_stiffness"], float) * np.exp(np.asarray(theta, float))
 
-    def on_params(self, theta, phys):
+    def on_params(self, theta, phys, model, on):
         return replace(phys, wire_stiffness=phys["wire_stiffness"] * jnp.exp(theta))

@@ -12,7 +12,7 @@ import pytest
 from simulator import Truth, write_set
 
 import tension_zones as tz
-from tension_zones.calibration import calibrate, load_csv
+from tension_zones.calibration import calibrate, read_csv
 from tension_zones.cli import main
 
 ALONE = {
@@ -30,7 +30,7 @@ ALONE = {
 def run(tmp_path, name, truth, seed=1, **kw):
     csv, dj = write_set(tmp_path, name, truth, 240, seed=seed)
     design = tz.Design.from_json(dj)
-    return calibrate(load_csv(csv, design.n_wires, float(design.length)), design, **kw).to_json()
+    return calibrate(read_csv(csv, design.n_wires, float(design.length)), design, **kw).to_json()
 
 
 def names(report):

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .data import Dataset
+from ._data import Dataset
 
 GLITCH_SIGMAS = 5.0
 

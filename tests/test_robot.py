@@ -1,6 +1,5 @@
-"""Multi-segment model: single-segment equivalence, routed wire lengths, equilibrium, Jacobians."""
-
-import os
+"""The robot model (one or more segments): single-segment equivalence, routing, chained kinematics,
+Jacobians and the one equilibrium solver."""
 
 import jax
 import jax.numpy as jnp
@@ -10,7 +9,7 @@ from scipy.optimize import minimize
 from scipy.spatial.transform import Rotation
 
 import tension_zones as tz
-from tension_zones.model import _robot as ms
+from tension_zones import model as ms
 
 DEG = np.pi / 180
 
@@ -40,16 +39,16 @@ def test_single_segment_kinematics_identical(b):
     d = tz.Design(3, 20.0, 2.0, wire_angles=np.radians([5, 110, 250]))
     rob = ms.Robot(d)
     B = b[None, :]
-    np.testing.assert_array_equal(ms.wire_lengths(rob, B), tz.wire_lengths_b(d, b))
-    p, R = ms.tip_pose(rob, B)
+    np.testing.assert_array_equal(rob.wire_lengths(B), tz.wire_lengths_b(d, b))
+    p, R = rob.tip_pose(B)
     p1, R1 = tz.tip_pose_b(d, b)
     np.testing.assert_array_equal(p, p1)
     np.testing.assert_array_equal(R, R1)
-    np.testing.assert_array_equal(ms.J_qB(rob), tz.J_qb(d))
-    np.testing.assert_allclose(ms.J_xB(rob, B), tz.J_xb(d, b), rtol=0, atol=1e-14)
+    np.testing.assert_array_equal(rob.J_qB(), tz.J_qb(d))
+    np.testing.assert_allclose(rob.J_xB(B), tz.J_xb(d, b), rtol=0, atol=1e-14)
     _, delta = tz.b_to_psi(jnp.asarray(b))
-    np.testing.assert_allclose(ms.tension_score(rob, B), tz.tension_score(d, delta), atol=1e-15)
-    np.testing.assert_array_equal(ms.tension_mask(rob, B), tz.tension_mask(d, delta))
+    np.testing.assert_allclose(rob.tension_score(B), tz.tension_score(d, delta), atol=1e-15)
+    np.testing.assert_array_equal(rob.tension_mask(B), tz.tension_mask(d, delta))
 
 
 def test_single_segment_jacobians_match_psi_coordinates():
@@ -57,8 +56,8 @@ def test_single_segment_jacobians_match_psi_coordinates():
     theta, delta = np.radians(60.0), np.radians(66.0)  # two taut wires (1 and 3)
     B = np.asarray(tz.psi_to_b(theta, delta))[None, :]
     rob = ms.Robot(d)
-    np.testing.assert_allclose(ms.J_xq(rob, B), tz.J_xq(d, theta, delta), atol=1e-10)
-    np.testing.assert_allclose(ms.reduced_J_xq(rob, B), tz.reduced_J_xq(d, theta, delta), atol=1e-10)
+    np.testing.assert_allclose(rob.J_xq(B), tz.J_xq(d, theta, delta), atol=1e-10)
+    np.testing.assert_allclose(rob.reduced_J_xq(B), tz.reduced_J_xq(d, theta, delta), atol=1e-10)
 
 
 def _single_equilibrium_reference(d, q, f):
@@ -103,7 +102,7 @@ def test_robot_from_dict_single_and_multi(tmp_path):
     with pytest.raises(ValueError, match="unknown robot design key"):
         ms.Robot.from_dict({"segments": [seg], "twist": 1})
     example = ms.Robot.from_json(
-        __import__("pathlib").Path(tz.__file__).parent / "examples" / "ftdcr_v4.design.json")
+        tz.example_path("ftdcr_v4/design.json"))
     assert example.n_wires_per_segment == (3, 3, 3)
     np.testing.assert_allclose(float(jnp.sum(example.lengths)), 186.5)
 
@@ -145,14 +144,14 @@ def _integrated_wire_length(rob, B, k, n=400):
 
 def test_distal_wire_lengths_match_integrated_path():
     rob = three_segments()
-    lengths = np.asarray(ms.wire_lengths(rob, B_BENT))
+    lengths = np.asarray(rob.wire_lengths(B_BENT))
     for k in [0, 4, 6, 9]:  # a proximal, a middle and two distal wires
         np.testing.assert_allclose(lengths[k], _integrated_wire_length(rob, B_BENT, k), atol=2e-3)
     # a distal wire changes length with every segment it crosses
     for j in range(3):
         B = np.zeros((3, 2))
         B[j] = [0.3, 0.1]
-        dl = np.asarray(ms.wire_length_changes(rob, B))
+        dl = np.asarray(rob.wire_length_changes(B))
         assert np.all(np.abs(dl[rob.crosses[:, j]]) > 0)
         np.testing.assert_array_equal(dl[~rob.crosses[:, j]], 0.0)
 
@@ -165,7 +164,7 @@ def test_tip_pose_is_product_of_segment_transforms():
         Tj = np.eye(4)
         Tj[:3, :3], Tj[:3, 3] = R, p
         T = T @ Tj
-    p, R = ms.tip_pose(rob, B_BENT)
+    p, R = rob.tip_pose(B_BENT)
     np.testing.assert_allclose(p, T[:3, 3], atol=1e-10)
     np.testing.assert_allclose(R, T[:3, :3], atol=1e-12)
 
@@ -175,7 +174,7 @@ def test_tip_pose_is_product_of_segment_transforms():
 # ---------------------------------------------------------------------------------------------
 def test_J_qB_and_J_xB_match_finite_differences():
     rob = three_segments()
-    tip = jax.jit(ms.tip_pose)
+    tip = jax.jit(lambda r, B: r.tip_pose(B))
     x = B_BENT.reshape(-1)
     h = 1e-6
     Jq_fd, Jp_fd = [], []
@@ -183,13 +182,13 @@ def test_J_qB_and_J_xB_match_finite_differences():
         e = np.zeros(6)
         e[i] = h
         Bp, Bm = (x + e).reshape(3, 2), (x - e).reshape(3, 2)
-        Jq_fd.append((ms.wire_lengths(rob, Bp) - ms.wire_lengths(rob, Bm)) / (2 * h))
+        Jq_fd.append((rob.wire_lengths(Bp) - rob.wire_lengths(Bm)) / (2 * h))
         Jp_fd.append((tip(rob, Bp)[0] - tip(rob, Bm)[0]) / (2 * h))
-    np.testing.assert_allclose(ms.J_qB(rob), np.stack(Jq_fd, 1), atol=1e-7)
-    Jx = ms.J_xB(rob, B_BENT)
+    np.testing.assert_allclose(rob.J_qB(), np.stack(Jq_fd, 1), atol=1e-7)
+    Jx = rob.J_xB(B_BENT)
     np.testing.assert_allclose(Jx[:3], np.stack(Jp_fd, 1), atol=1e-6)
     # angular part: vee(dR R^T) by finite differences
-    R0 = np.asarray(ms.tip_pose(rob, B_BENT)[1])
+    R0 = np.asarray(rob.tip_pose(B_BENT)[1])
     for i in range(6):
         e = np.zeros(6)
         e[i] = h
@@ -201,8 +200,8 @@ def test_J_qB_and_J_xB_match_finite_differences():
 
 def test_reduced_jacobian_zeroes_slack_columns():
     rob = three_segments()
-    mask = np.asarray(ms.tension_mask(rob, B_BENT))
-    J = np.asarray(ms.reduced_J_xq(rob, B_BENT))
+    mask = np.asarray(rob.tension_mask(B_BENT))
+    J = np.asarray(rob.reduced_J_xq(B_BENT))
     assert 0 < mask.sum() < rob.n_wires
     np.testing.assert_array_equal(J[:, mask == 0], 0.0)
     assert np.all(np.isfinite(J))
@@ -223,8 +222,6 @@ def test_equilibrium_is_optimal_and_pull_only(q):
     _check_optimal(rob, q, None)
 
 
-@pytest.mark.skipif(not os.environ.get("TZ_SLOW_TESTS"),
-                    reason="~2 min to compile the load's Hessian; set TZ_SLOW_TESTS=1")
 def test_loaded_equilibrium_is_optimal_with_exact_derivatives():
     """Tip force and gravity on two segments."""
     rob = ms.Robot(three_segments(preload=0.5).segments[:2])
@@ -280,7 +277,9 @@ def test_equilibrium_derivatives_match_finite_differences():
     # reverse mode through the implicit rule, in a robot parameter
     @jax.jit
     def tip_x(ei):
-        segs = (ms._design_with(rob.segments[0], backbone_EI=ei),) + rob.segments[1:]
+        leaves, treedef = jax.tree_util.tree_flatten(rob.segments[0])
+        leaves[4] = ei  # backbone_EI (Design's leaves: length, pitch_radius, wire_angles, k_w, EI, preload)
+        segs = (jax.tree_util.tree_unflatten(treedef, leaves),) + rob.segments[1:]
         return ms.forward(ms.Robot(segs), q)[0][0]
 
     g = jax.jit(jax.grad(tip_x))(2400.0)
@@ -295,8 +294,8 @@ def test_straight_pose_values_and_gradients_finite():
     np.testing.assert_array_equal(B, 0.0)
     J = J_PQ(rob, q, None)
     assert np.all(np.isfinite(J)) and np.abs(J).max() > 0
-    assert np.all(np.isfinite(ms.J_xB(rob, B)))
-    assert np.all(np.isfinite(ms.reduced_J_xq(rob, B)))
+    assert np.all(np.isfinite(rob.J_xB(B)))
+    assert np.all(np.isfinite(rob.reduced_J_xq(B)))
     g = jax.jit(jax.grad(lambda r: ms.forward(r, q)[0][0]))(rob)
     assert all(np.all(np.isfinite(x)) for x in jax.tree_util.tree_leaves(g))
 
@@ -309,3 +308,107 @@ def test_vmapped_and_new_values_do_not_recompile():
     np.testing.assert_allclose(P[1], ms.forward(rob, Q[1])[0], atol=1e-12)
     f(three_segments(k_w=80.0, preload=0.2), Q)
     assert f._cache_size() == 1
+
+
+# ---------------------------------------------------------------------------------------------
+# closed forms of the chain and the load, routing from design files, friction
+# ---------------------------------------------------------------------------------------------
+from tension_zones.model import _equilibrium as E  # noqa: E402
+from tension_zones.model import _kinematics as K  # noqa: E402
+from tension_zones.model._robot import chain_poses, chain_tip  # noqa: E402
+
+
+@pytest.mark.parametrize("b", [np.array([0.0, 0.0]), np.array([0.7, -0.4]), np.array([1e-7, 0.0])])
+def test_weight_moment_is_the_integral_of_the_arc(b):
+    L = 30.0
+    x, w = np.polynomial.legendre.leggauss(20)
+    s = 0.5 * L * (x + 1.0)
+    pts = np.stack([np.asarray(K.segment_pose(si, b * si / L)[0]) for si in s])
+    np.testing.assert_allclose(K.segment_weight_moment(L, jnp.asarray(b)), 0.5 * L * w @ pts, rtol=1e-12, atol=1e-9)
+    J = jax.jacfwd(lambda bb: K.segment_weight_moment(L, bb))(jnp.asarray(b))
+    np.testing.assert_allclose(K.segment_weight_moment_jacobian(L, jnp.asarray(b)), J, atol=1e-9)
+
+
+@pytest.mark.parametrize("x", [np.zeros(6), B_BENT.reshape(-1)])
+def test_load_jacobians_and_chain_tip_derivative_are_exact(x):
+    L = jnp.asarray([60.0, 62.5, 64.0])
+    f, g = jnp.asarray([0.3, -0.2, 0.5]), jnp.asarray([1e-3, 2e-3, -4e-3])
+    x = jnp.asarray(x)
+    np.testing.assert_allclose(E.load_gradient(L, x, f, g), jax.grad(E.load_potential, argnums=1)(L, x, f, g),
+                               atol=1e-10)
+    # the custom derivative of the tip against forward mode through the plain chain, in B and L
+    plain = lambda LL, xx: chain_poses(LL, xx.reshape(3, 2))[0][-1]  # noqa: E731
+    fast = lambda LL, xx: chain_tip(LL, xx.reshape(3, 2))[0]  # noqa: E731
+    for arg in (0, 1):
+        np.testing.assert_allclose(jax.jacfwd(fast, argnums=arg)(L, x), jax.jacfwd(plain, argnums=arg)(L, x),
+                                   atol=1e-10)
+    Rp = jax.jacfwd(lambda xx: chain_poses(L, xx.reshape(3, 2))[1][-1])(x)
+    Rf = jax.jacfwd(lambda xx: chain_tip(L, xx.reshape(3, 2))[1])(x)
+    np.testing.assert_allclose(Rf, Rp, atol=1e-10)
+
+
+def test_declared_routing_is_read_and_written(tmp_path):
+    seg = dict(length_mm=40.0, n_wires=3, pitch_radius_mm=3.0)
+    d = {"segments": [seg, dict(seg, wire_angles_deg=[30.0, 150.0, 270.0],
+                                route_angles_deg=[[35.0], [155.0], [275.0]], route_radii_mm=[[4.0], [4.0], [4.0]])]}
+    rob = ms.Robot.from_dict(d)
+    np.testing.assert_allclose(np.degrees(rob.route_angles[3:, 0]), [35.0, 155.0, 275.0])
+    np.testing.assert_allclose(rob.route_radii[3:, 0], 4.0)
+    np.testing.assert_allclose(np.degrees(rob.route_angles[3:, 1]), [30.0, 150.0, 270.0])  # own segment
+    np.testing.assert_allclose(ms.Robot.from_dict(rob.to_dict()).route_radii, rob.route_radii)
+    B = np.array([[0.3, 0.1], [0.0, 0.0]])
+    default = ms.Robot.from_dict({"segments": [seg, dict(seg, wire_angles_deg=[30.0, 150.0, 270.0])]})
+    assert not np.allclose(rob.wire_lengths(B)[3:], default.wire_lengths(B)[3:])
+    with pytest.raises(ValueError, match="segment 1: route_radii_mm must be a list of 3 lists"):
+        ms.Robot.from_dict({"segments": [seg, dict(seg, route_radii_mm=[[4.0, 1.0]] * 3)]})
+    with pytest.raises(ValueError, match="route_radii_mm must be positive"):
+        ms.Robot.from_dict({"segments": [seg, dict(seg, route_radii_mm=[[-4.0]] * 3)]})
+
+
+def _solve(rob, q, mu, direction, load=None):
+    phys = rob.params()
+    phys["friction"] = jnp.asarray(mu)
+    f = jnp.zeros(3) if load is None else load.tip_force
+    if load is not None:
+        phys["gravity"] = load.gravity
+    return E.solve(phys, rob.structure, q, f, direction)
+
+
+def test_friction_equilibrium_is_the_root_and_its_derivatives_are_exact():
+    rob = three_segments(preload=0.5)
+    q, d = jnp.asarray(Q_CASES[0]), jnp.asarray(np.sign(Q_CASES[0]))
+    mu = jnp.asarray([0.1, 0.2])
+    B = jax.jit(_solve)(rob, q, mu, d)
+    phys = rob.params()
+    phys["friction"] = mu
+    F = E._Sample(phys, rob.structure, q, jnp.zeros(3), d, jnp.asarray(False)).force(B.reshape(-1))
+    np.testing.assert_allclose(F, 0.0, atol=1e-9)
+    assert np.abs(np.asarray(B) - np.asarray(EQ(rob, q, None))).max() > 1e-3  # friction matters
+    tip = jax.jit(lambda m: rob.tip_pose(_solve(rob, q, m, d))[0])
+    J = jax.jacfwd(tip)(mu)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        np.testing.assert_allclose(J[:, i], (tip(mu + e) - tip(mu - e)) / (2 * h), rtol=1e-5, atol=1e-6)
+
+
+def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():
+    """Regression: one wire pulled, the others paid out, a tip force pushing down and sideways: the
+    energy's Hessian at the straight start has a negative eigenvalue. The solve must still reach a
+    stationary point that is a minimum (the modified Newton once took a near-infinite step there and
+    stayed at the start)."""
+    rob = ms.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), backbone_EI=1800.0,
+                              wire_stiffness=30.0),
+                    tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), backbone_EI=2400.0,
+                              wire_stiffness=80.0)])
+    q = jnp.asarray([0.8, 0.8, -2.0, 0.8, 0.8, 0.8, 0.8])
+    load = ms.Load(jnp.asarray([0.3, -0.2, -0.4]), jnp.zeros(3))
+    x = np.asarray(EQ(rob, q, load)).reshape(-1)
+    V = jax.jit(lambda y: ms.energy(rob, y.reshape(2, 2), q, load))
+    G = jax.jit(jax.grad(lambda y: ms.energy(rob, y.reshape(2, 2), q, load)))
+    np.testing.assert_allclose(G(jnp.asarray(x)), 0.0, atol=1e-8)
+    rng = np.random.default_rng(0)
+    assert all(float(V(jnp.asarray(x + 1e-3 * rng.normal(size=4)))) > float(V(jnp.asarray(x))) for _ in range(20))
+    ref = minimize(lambda y: float(V(jnp.asarray(y))), np.zeros(4), jac=lambda y: np.asarray(G(jnp.asarray(y))),
+                   method="BFGS", options={"gtol": 1e-10})
+    assert float(V(jnp.asarray(x))) <= ref.fun + 1e-9

@@ -1,0 +1,117 @@
+"""Calibration speed, end to end, side by side with the code before the one-loop rewrite.
+
+    python benchmarks/calibration.py --baseline DIR [--json out.json] [--no-readme]
+
+``DIR`` is a checkout of the baseline (``git worktree add DIR dce5739``: the last commit with the
+separate multi-segment stack). Every case runs ``tension-zones calibrate`` in a fresh process (what a
+lab engineer waits for: imports, compilation, fits, report), one case after the other, with
+``JAX_LOG_COMPILES=1`` so that the number of XLA compilations is counted from the log. Cases:
+
+* FTDCR v4, ``train.csv`` with ``val.csv`` as the validation file (``--format opencr``);
+* a 500-sample single-segment set (the shipped ``synthetic/unknown_a_3w``).
+
+The results go into ``benchmarks/README.md`` between the ``CALIBRATION`` markers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+EX = ROOT / "tension_zones" / "examples"
+
+_CHILD = """
+import sys, time
+sys.path.insert(0, sys.argv[1])
+import tension_zones
+assert tension_zones.__file__.startswith(sys.argv[1]), tension_zones.__file__
+from tension_zones.cli import main
+t0 = time.perf_counter()
+rc = main(sys.argv[2:])
+print("SECONDS", time.perf_counter() - t0, "RC", rc, flush=True)
+"""
+
+
+def run(code_root: Path, args: list[str]) -> dict:
+    env = dict(os.environ, JAX_LOG_COMPILES="1", PYTHONWARNINGS="ignore")
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-c", _CHILD, str(code_root), *args], capture_output=True, text=True,
+                       env=env, timeout=7200)
+    wall = time.perf_counter() - t0
+    m = re.search(r"SECONDS ([\d.]+) RC (\d+)", r.stdout)
+    if not m or m.group(2) != "0":
+        raise RuntimeError(f"{args[:2]} failed:\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}")
+    compiles = len(re.findall(r"Compiling \S+", r.stderr))
+    return {"seconds": float(m.group(1)), "wall_seconds": wall, "compilations": compiles,
+            "summary": r.stdout.strip().splitlines()[-2] if len(r.stdout.strip().splitlines()) > 1 else ""}
+
+
+def cases(out: Path):
+    ftdcr = EX / "ftdcr_v4"
+    return {
+        "FTDCR v4 (3 segments, 1620 + 443 samples)": [
+            "calibrate", str(ftdcr / "train.csv"), "--format", "opencr", "--design", str(ftdcr / "design.json"),
+            "--validate", str(ftdcr / "val.csv"), "--out", str(out / "ftdcr"), "--quiet"],
+        "unknown_a_3w (1 segment, 500 samples)": [
+            "calibrate", str(EX / "synthetic" / "unknown_a_3w.csv"), "--design",
+            str(EX / "synthetic" / "unknown_a_3w.design.json"), "--out", str(out / "single"), "--quiet"],
+    }
+
+
+def load() -> str:
+    return os.popen("uptime").read().strip()
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--baseline", required=True, help="a checkout of the baseline commit")
+    p.add_argument("--json", help="write the numbers to this JSON file")
+    p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
+    p.add_argument("--only", choices=("new", "baseline"), help="run one side only")
+    args = p.parse_args(argv)
+    res = {"started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_at_start": load(), "rows": []}
+    for side, root in (("this code", ROOT), ("baseline", Path(args.baseline).resolve())):
+        if args.only and (args.only == "new") != (side == "this code"):
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            for name, cli in cases(Path(tmp)).items():
+                print(f"[{side}] {name} ...", flush=True)
+                r = run(root, cli)
+                r.update(side=side, case=name, load=load())
+                print(json.dumps(r), flush=True)
+                res["rows"].append(r)
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=1))
+    md = markdown(res)
+    print(md)
+    if not args.no_readme:
+        path = HERE / "README.md"
+        text = path.read_text()
+        a, b = "<!-- CALIBRATION START -->", "<!-- CALIBRATION END -->"
+        head, rest = text.split(a, 1)
+        _, tail = rest.split(b, 1)
+        path.write_text(f"{head}{a}\n{md}\n{b}{tail}")
+
+
+def markdown(res) -> str:
+    lines = [f"`python benchmarks/calibration.py --baseline DIR`, started {res['started']} "
+             f"({res['load_at_start']}).", "",
+             "| case | code | seconds (in process) | wall seconds (fresh process) | XLA compilations |",
+             "|---|---|---:|---:|---:|"]
+    for r in res["rows"]:
+        lines.append(f"| {r['case']} | {r['side']} | {r['seconds']:.1f} | {r['wall_seconds']:.1f} | "
+                     f"{r['compilations']} |")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,112 @@
+"""The one least-squares solver of the package: bounded, robust Levenberg-Marquardt, traced.
+
+Used by the calibration (every fit of the loop) and by the paper's identification. Written to run
+inside ``jit`` as one ``while_loop`` with one evaluation of the model per pass, so a calibration
+compiles it once and then refits any subset of parameters (a 0/1 ``free`` mask), with any sample
+weights, Huber threshold and iteration limit, without recompiling.
+
+Why not ``jaxopt.LevenbergMarquardt``: measured on the FTDCR v4 fit (nominal parameters, preload and
+backlash: 28 free of 65 parameters, 1620 samples, 40 iterations each, same residuals and start; on this
+2-core machine under load), both reach the same training RMSE (3.9931 mm); jaxopt's first call took
+149 s against 74 s (it compiled twice as long), its run 6.2 s against 9.3 s (it differentiated only
+the 28 free columns, which would mean a new program for every set of effects, where this solver
+takes the free set as data). What decides is robustness: it has no bounds (the calibration's
+parameters have physical ones, e.g. a play or a friction coefficient cannot be negative, and their
+null values sit on them), no per-sample weights or robust loss, and an isotropic damping ``mu I``
+where the parameters' scales span six orders of magnitude; Marquardt's ``diag(J'WJ)`` scaling below is
+scale-free. So the package keeps this one solver and no longer depends on jaxopt.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+
+def huber_weights(r, c):
+    """IRLS weights of the Huber loss on each row's residual norm (``r`` (M, d); ``c = inf``: least
+    squares)."""
+    n = jnp.sqrt(jnp.sum(r * r, axis=-1) + 1e-300)
+    return jnp.where(n <= c, 1.0, c / n)
+
+
+def huber_cost(r, w, c):
+    """``sum_i w_i rho_c(|r_i|)``, ``rho_c`` the Huber function (quadratic below ``c``)."""
+    n = jnp.sqrt(jnp.sum(r * r, axis=-1))
+    rho = jnp.where(n <= c, 0.5 * n * n, c * n - 0.5 * c * c)
+    return jnp.sum(w * rho)
+
+
+def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=-jnp.inf, hi=jnp.inf,
+                        max_iter=40, tol=1e-10):
+    """Minimise ``sum_i w_i rho(|fun(theta)_i|)`` over the ``free`` parameters within ``[lo, hi]``.
+
+    Args:
+        fun: ``theta (P,) -> residuals (M, d)`` (rows are samples; a (M,) result is taken as (M, 1)).
+            Its Jacobian is taken by forward mode (``P`` columns).
+        theta0: start (P,); the parameters with ``free = 0`` stay there.
+        free: 0/1 (P,), default all; weights: per-row weights (M,), default 1 (0 = not in the fit).
+        huber: Huber threshold on a row's residual norm (``inf``: least squares; otherwise
+            iteratively reweighted).
+        lo, hi: bounds (scalars or (P,)), enforced by projecting every step.
+        max_iter: iteration limit (may be traced); ``0`` just evaluates residuals and Jacobian.
+        tol: stop when an accepted step lowers the cost by less than this, relative.
+    Returns ``(theta, cost, iterations, residuals (M, d), Jacobian (M, d, P))`` at the result.
+
+    Marquardt's scaling (damping ``lam diag(J'WJ)``), a step accepted only if the cost falls (a
+    non-finite cost is rejected, so a model that fails somewhere just shortens the step).
+    """
+    theta0 = jnp.asarray(theta0)
+    P = theta0.shape[0]
+    free = jnp.ones(P, theta0.dtype) if free is None else jnp.asarray(free, theta0.dtype)
+    freeb = free > 0
+    eye = jnp.eye(P, dtype=theta0.dtype)
+    lo = jnp.broadcast_to(jnp.asarray(lo, theta0.dtype), (P,))
+    hi = jnp.broadcast_to(jnp.asarray(hi, theta0.dtype), (P,))
+
+    def res(th):
+        r = fun(th)
+        return r[:, None] if r.ndim == 1 else r
+
+    def res_jac(th):
+        r = res(th)
+        return r, jax.jacfwd(res)(th)
+
+    r_shape = jax.eval_shape(res, theta0).shape
+    w = jnp.ones(r_shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
+
+    def propose(th, r, J, lam):
+        sw = w * huber_weights(r, huber)
+        J = J * free
+        A = jnp.einsum("nip,niq,n->pq", J, J, sw)
+        g = jnp.einsum("nip,ni,n->p", J, r, sw)
+        d = jnp.diag(A)
+        d = jnp.maximum(d, 1e-12 * jnp.max(d) + 1e-300)
+        A = jnp.where(freeb[:, None] & freeb[None, :], A + lam * jnp.diag(d), eye)
+        step = -jnp.linalg.solve(A, jnp.where(freeb, g, 0.0))
+        return jnp.clip(th + jnp.where(freeb, step, 0.0), lo, hi)
+
+    # One model evaluation per pass (a single copy of the model in the compiled program): evaluate
+    # the candidate, accept it if it lowers the cost (the first pass always does), propose the next.
+    def body(state):
+        th, r, J, cost, cand, lam, it, _ = state
+        r_c, J_c = res_jac(cand)
+        cost_c = huber_cost(r_c, w, huber)
+        ok = cost_c < cost
+        ok = ok | (it == 0)
+        rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
+        done = (ok & (it > 0) & (rel < tol)) | (lam > 1e12)
+        th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
+        cost = jnp.where(ok, cost_c, cost)
+        lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
+        return th, r, J, cost, propose(th, r, J, lam), lam, it + 1, done
+
+    def cond(state):
+        return (state[6] <= max_iter) & ~state[7]
+
+    dt = theta0.dtype
+    start = jnp.clip(theta0, lo, hi)
+    state = (start, jnp.zeros(r_shape, dt), jnp.zeros(r_shape + (P,), dt), jnp.asarray(jnp.inf, dt), start,
+             jnp.asarray(1e-3, dt), 0, False)
+    th, r, J, cost, _, _, it, _ = jax.lax.while_loop(cond, body, state)
+    return th, cost, it, r, J

@@ -1,0 +1,447 @@
+"""The calibration loop: fit the nominal model, trace the held-out residual to an effect, add it, repeat.
+
+For any robot (one segment or many) and any reader:
+
+1. Split the data (:meth:`Dataset.split`: the tail of the acquisition order, or whole pattern groups
+   for labelled recordings). Fit the nominal parameters on the training part.
+2. Score every candidate effect on the *held-out* residual (:func:`._diagnose.score_test`: the
+   residual projected on the effect's parameter sensitivities, after what the fitted parameters can
+   explain; a z-value).
+3. Refit the significant candidates on the training part (where more than ``TRIES_PER_ROUND`` are
+   significant, a short refit of each first, then full refits of the best of those);
+   a refit counts when its held-out error drops significantly: the drop of the held-out sum of
+   squares, in units of the current residual's per-axis variance (at least the noise variance), must
+   exceed the chi-square quantile of the effect's parameter count at ``alpha``, the held-out RMSE
+   must fall by at least ``min_gain``, the drop of the mean square must be a fair share of its excess
+   over the noise floor (``min_excess`` near the noise floor, less far above it: see
+   ``EXCESS_SCALE``), and the training part must gain consistently (``CONSISTENCY``). Of those, the
+   one with the lowest held-out error is kept (effects overlap: a registration explains
+   part of almost anything, the true effect all of it). Then a backward step: an earlier effect
+   whose removal no longer raises the held-out error significantly (same test) was only standing in
+   for the new one, and is removed.
+4. Repeat until no candidate helps; test the final held-out residual for structure left; report the
+   error before and after. A validation file is only predicted, after every decision: its samples
+   ride along in the same compiled program (a second recording, weight zero) and are never looked at
+   before the selection is over.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+
+import jax
+import numpy as np
+
+from ..model import Design, Robot
+from ._baselines import baselines
+from ._data import Dataset
+from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
+from ._model import RobotModel
+from ._problem import Problem, correlations, parameter_std
+from .effects import library as default_library
+from .effects import nominal as default_nominal
+
+#: Structure left is claimed when a feature's permutation z-value (or the offset's) exceeds this.
+STRUCTURE_Z = 4.0
+#: ... or when the held-out RMSE exceeds the noise floor by this factor with an F-type z > STRUCTURE_Z.
+EXCESS_RATIO = 1.15
+#: Significant candidates refitted fully per round; the lowest held-out error wins. Where more are
+#: significant, each first gets a short refit (``SCREEN_ITERATIONS``) and the best of those go on.
+TRIES_PER_ROUND = 4
+SCREEN_ITERATIONS = 6
+#: A candidate must explain ``min_excess`` of the held-out mean square's excess over the noise floor
+#: while the model is within this many noise floors of it, and a share falling as ``1 / ratio``
+#: beyond: far above the noise the excess is the sum of many missing effects, and one real effect
+#: explains only its part (on the FTDCR v4 robot, 8-22 %); near the noise, structure from outside the
+#: library lets flexible effects explain 10-20 % of it by chance.
+EXCESS_SCALE = 4.0
+#: ... and its relative gain on the training part must be at least this fraction of its held-out
+#: gain: an effect fitted on the training part that barely improves it but happens to improve the
+#: held-out part explains a coincidence, not the robot.
+CONSISTENCY = 0.5
+
+
+@dataclasses.dataclass
+class Result:
+    """Everything the report needs. ``theta_*`` are full parameter vectors of ``problem``; boolean
+    masks are over its samples (training data, then the validation file's if one was given)."""
+
+    problem: Problem
+    train: np.ndarray
+    held: np.ndarray
+    val: np.ndarray
+    holdout: str
+    noise: dict
+    theta_declared: np.ndarray
+    theta_before: np.ndarray
+    theta_after: np.ndarray
+    std_after: np.ndarray
+    nominal: list
+    active: list
+    effects: list
+    candidates: list
+    rounds: list
+    steps: list
+    structure: dict
+    rmse: dict
+    unexplained_structure: bool
+    robust: bool
+    correlations: dict
+    at_bound: list
+    features: dict
+    baselines: dict | None
+    seconds: float
+
+    @property
+    def data(self) -> Dataset:
+        return self.problem.data
+
+    def predicted(self, theta=None, active=None) -> np.ndarray:
+        """Predicted tip positions (N, 3) of every sample, by default of the final model."""
+        theta = self.theta_after if theta is None else theta
+        return self.problem.predict(theta, self.active if active is None else active)
+
+    def to_json(self) -> dict:
+        """The ``report.json`` content."""
+        pb = self.problem
+        out = {
+            "data": pb.data.source,
+            "frame": pb.data.frame,
+            "n_samples": int((self.train | self.held).sum()),
+            "n_train": int(self.train.sum()),
+            "n_held_out": int(self.held.sum()),
+            "holdout": self.holdout,
+            "dropped_rows": len(pb.data.dropped),
+            "dropped": list(pb.data.dropped),
+            "robust": self.robust,
+            "rmse_declared_mm": self.rmse["declared"],
+            "rmse_before_mm": self.rmse["before"],
+            "rmse_after_mm": self.rmse["after"],
+            "rmse_train_after_mm": self.rmse["train_after"],
+            "noise_floor_mm": self.noise["floor_mm"],
+            "noise": self.noise,
+            "nominal_parameters": list(self.nominal),
+            "effects": self.effects,
+            "candidates": self.candidates,
+            "rounds": self.rounds,
+            "steps": self.steps,
+            "unexplained_structure": self.unexplained_structure,
+            "structure": self.structure,
+            "parameters": {**final_parameters(pb, self.theta_after, self.active),
+                           "std": pb.describe_std(self.theta_after, self.active, self.std_after),
+                           "at_bound": self.at_bound},
+            "correlations": self.correlations,
+            "model": {"blocks": [b.name for b in pb.spec.blocks], "active": list(self.active),
+                      "theta": np.asarray(self.theta_after).tolist()},
+            "seconds": self.seconds,
+        }
+        if self.val.any():
+            out.update(n_validate=int(self.val.sum()), rmse_validate_mm=self.rmse["validate"],
+                       rmse_validate_aligned_mm=self.rmse["validate_aligned"], baselines=self.baselines)
+        return out
+
+
+def final_parameters(pb: Problem, theta, active) -> dict:
+    """The physical parameters after every fitted effect, plus each fitted block in report units."""
+    parts = pb.spec.slices()
+    on = {b.name: float(b.name in active) for b in pb.spec.blocks}
+    phys = pb.phys0
+    for b in pb.spec.blocks:
+        phys = b.on_params(np.asarray(theta)[parts[b.name]], phys, pb.model, on)
+    phys = jax.tree_util.tree_map(lambda x: np.asarray(x).tolist(), phys)
+    phys["route_angles_deg"] = np.degrees(phys.pop("route_angles")).tolist()
+    return {"physical": phys, "fitted": pb.describe(theta, active)}
+
+
+def rmse(r) -> float:
+    """Tip-position RMSE (mm) of residuals (M, 3): ``sqrt(mean |r|^2)``."""
+    r = np.asarray(r)
+    return float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if len(r) else float("nan")
+
+
+def rmse_aligned(r) -> float:
+    """RMSE after removing the mean offset (the metric the OpenCR lab reports)."""
+    r = np.asarray(r)
+    return rmse(r - r.mean(axis=0))
+
+
+def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None, library=None, nominal=None,
+              holdout: float = 0.25, robust: bool = False, alpha: float = 1e-3, min_gain: float = 0.01,
+              min_excess: float = 0.25, max_rounds: int | None = None, log=None) -> Result:
+    """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
+
+    ``validate``: a second recording of the same robot, only predicted after the selection.
+    ``library`` / ``nominal``: candidate and always-fitted effects (defaults by the data's frame,
+    :func:`.effects.library`). ``log`` (callable taking a str) reports progress.
+    """
+    t0 = time.perf_counter()
+    say = log or (lambda s: None)
+    robot = Robot(robot) if isinstance(robot, Design) else robot
+    model = model or RobotModel.of(robot)
+    library = default_library(data.frame) if library is None else tuple(library)
+    nominal = default_nominal(data.frame) if nominal is None else tuple(nominal)
+    train, held = data.split(holdout)
+    n_fit = data.n_samples
+    full = data if validate is None else data.concat(validate)
+    val = np.arange(full.n_samples) >= n_fit
+    train = np.r_[train, np.zeros(full.n_samples - n_fit, bool)]
+    held = np.r_[held, np.zeros(full.n_samples - n_fit, bool)]
+    pb = Problem(model, robot, full, tuple(nominal) + tuple(library))
+    w_train = train.astype(float)
+    cand_names = [b.name for b in library]
+    nominal_names = [b.name for b in nominal]
+    sl = pb.spec.slices()
+    P = pb.null.size
+
+    theta_decl = pb.null.copy()
+    r_decl = pb.residuals(theta_decl, [])
+    try:
+        noise = noise_floor(data)
+    except ValueError:
+        noise = None
+    sigma = None if noise is None else np.asarray(noise["sigma_mm"])
+
+    def fit(theta0, active):
+        if not robust:
+            return pb.fit(theta0, active, w_train)
+        th = theta0
+        for _ in range(2):  # the Huber threshold follows the residual's scale (3.5 noise sigmas at least)
+            r = pb.residuals(th, active)[train]
+            scale = np.median(np.linalg.norm(r, axis=1)) / 1.54  # median of a 3-D chi is 1.54 sigma
+            c = max(2.5 * scale, 3.5 * (float(np.mean(sigma)) if sigma is not None else scale))
+            th = pb.fit(th, active, w_train, huber_c=c)
+        return th
+
+    def decision_error(r, mask):
+        """The RMSE used for decisions: robust mode leaves tracker glitches out."""
+        if not robust:
+            return rmse(r[mask])
+        return rmse(r[mask][_glitch_weights(r[mask], sigma) > 0])
+
+    def held_error(theta, active):
+        """(plain RMSE, the error used for decisions, residuals) on the held-out part."""
+        r = pb.residuals(theta, active)
+        return rmse(r[held]), decision_error(r, held), r
+
+    active = list(nominal_names)
+    theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
+    theta_before = theta.copy()
+    if noise is None:
+        noise = noise_floor(data, pb.residuals(theta, active)[:n_fit])
+        sigma = np.asarray(noise["sigma_mm"])
+    sigma = np.maximum(sigma, 1e-9)
+    rmse_before, err, r = held_error(theta, active)
+    say(f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
+        f"noise floor {noise['floor_mm']:.4f} mm")
+    effects, candidates, rounds = [], [], []
+    models = [(list(active), theta.copy())]  # every accepted model, for the validation steps
+    rnd = 0
+    max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
+    while rnd < max_rounds:
+        rnd += 1
+        remaining = [n for n in cand_names if n not in active]
+        if not remaining:
+            break
+        r, J = pb.jacobian(theta, active)
+        active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
+        wts = _glitch_weights(r[held], sigma) if robust else None
+        # the score test's null is "what is left is noise"; far above the noise floor, what is left is
+        # mostly model error, and a candidate must explain more of it than its parameter count would by
+        # chance: the residual's own per-axis scale replaces the noise's there
+        kept_h = r[held] if wts is None else r[held][wts > 0]
+        sigma_score = np.maximum(sigma, np.sqrt(np.mean(kept_h**2, axis=0)))
+        scores = []
+        for name in remaining:
+            s = score_test(r[held], J[held], active_cols, np.arange(P)[sl[name]], sigma_score, wts)
+            scores.append({"round": rnd, "name": name, "score": s["score"], "dof": s["dof"],
+                           "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0))})
+        scores.sort(key=lambda d: -d["score"])
+        candidates.extend(scores)
+        z_crit = _norm_isf(alpha / max(len(remaining), 1))
+        say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
+        tried = []
+        m = int(held.sum())
+        significant = [s for s in scores if s["score"] > z_crit]
+        if len(significant) > TRIES_PER_ROUND:
+            # screen: a short refit of every significant candidate, then the full refits of the best
+            for s in significant:
+                th0 = theta.copy()
+                th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
+                s["screened_rmse_mm"] = held_error(pb.fit(th0, active + [s["name"]], w_train,
+                                                          max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
+            say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
+            significant.sort(key=lambda s: s["screened_rmse_mm"])
+        for s in significant[:TRIES_PER_ROUND]:
+            th0 = theta.copy()
+            th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
+            th_new = fit(th0, active + [s["name"]])
+            plain_new, err_new, r_new = held_error(th_new, active + [s["name"]])
+            # held-out SSE drop in units of the per-axis variance of the current residual (at least
+            # the noise): structure the model lacks must not make a chance improvement look significant
+            unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+            drop = (err**2 - err_new**2) * m / unit
+            need = chi2_quantile(alpha, max(s["dof"], 1))
+            share, share_train = _shares(err, err_new, decision_error(r, train), decision_error(r_new, train),
+                                         noise["floor_mm"])
+            ok = (drop > need and err_new < (1.0 - min_gain) * err
+                  and share >= min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
+                  and share_train >= CONSISTENCY * share)
+            tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
+                          "share_held_out": share, "share_train": share_train, "sse_drop": drop,
+                          "needed": need, "significant": bool(ok), "theta": th_new, "err": err_new,
+                          "score": s["score"]})
+            say(f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
+                f"{' significant' if ok else ''}")
+        good = [t for t in tried if t["significant"]]
+        accepted = min(good, key=lambda t: t["err"]) if good else None
+        if accepted is not None:
+            theta, err = accepted["theta"], accepted["err"]
+            active.append(accepted["name"])
+            effects.append({"name": accepted["name"], "rmse_after_mm": accepted["rmse_held_out_mm"],
+                            "score": accepted["score"]})
+            say(f"  kept {accepted['name']}")
+        for t in tried:
+            t.pop("theta"), t.pop("err"), t.pop("score")
+            t["accepted"] = accepted is not None and t["name"] == accepted["name"]
+        accepted = None if accepted is None else accepted["name"]
+        removed = []
+        if accepted is not None:
+            # backward step: an earlier effect that only stood in for the one just added goes
+            for e in [e for e in effects if e["name"] != accepted]:
+                th0 = theta.copy()
+                th0[sl[e["name"]]] = pb.null[sl[e["name"]]]
+                rest = [a for a in active if a != e["name"]]
+                th_wo = fit(th0, rest)
+                plain_wo, err_wo, _ = held_error(th_wo, rest)
+                unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+                rise = (err_wo**2 - err**2) * m / unit
+                need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
+                say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
+                if rise < need:
+                    theta, err, active = th_wo, err_wo, rest
+                    effects = [x for x in effects if x["name"] != e["name"]]
+                    removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
+                                    "needed": need})
+                    say(f"  removed {e['name']}")
+                    break
+            models.append((list(active), theta.copy()))
+        rounds.append({"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": rmse(r[held]),
+                       "rmse_train_mm": rmse(r[train]), "tried": tried, "accepted": accepted, "removed": removed})
+        if accepted is None:
+            break
+
+    # the final model: its effects' parameters (later effects refit earlier ones), deviations,
+    # identifiability, the structure left
+    r_after, J_after = pb.jacobian(theta, active)
+    free = pb.mask(active)
+    std = parameter_std(J_after, r_after, free, w_train)
+    for e in effects:
+        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
+        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
+    corr = correlations(J_after, free, w_train, pb.labels(active))
+    feats = features(full, _base_frame_prediction(pb, theta_before, active[: len(nominal_names)]))
+    held_feats = {k: v[held] for k, v in feats.items()}
+    structure = structure_test(r_after[held], held_feats, sigma)
+    plain_after, err_after, _ = held_error(theta, active)
+    # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
+    # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
+    log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
+    sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
+    excess = {"ratio_to_floor": plain_after / noise["floor_mm"], "z": log_ratio / sd}
+    structure["excess_over_noise"] = excess
+    unexplained = bool(
+        any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
+        or (excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z)
+    )
+    rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
+              "train_after": rmse(r_after[train])}
+    steps = []
+    for act, th in models:  # the validation file, predicted only now, for every accepted model
+        rr = pb.residuals(th, act)
+        steps.append({"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
+                      "rmse_validate_mm": rmse(rr[val]) if val.any() else None,
+                      "rmse_validate_aligned_mm": rmse_aligned(rr[val]) if val.any() else None})
+    bl = None
+    if val.any():
+        rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_after[val]), rmse_aligned(r_after[val])
+        bl = baselines(full, train, held, val)
+        say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
+    return Result(problem=pb, train=train, held=held, val=val, holdout=data.split_description(holdout),
+                  noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_after=theta,
+                  std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
+                  rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
+                  robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
+                  baselines=bl, seconds=time.perf_counter() - t0)
+
+
+def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
+    """The fractions of the held-out and the training mean square's excess over the noise floor that
+    a refit removes."""
+    def share(a, b):
+        excess = a**2 - floor**2
+        return (a**2 - b**2) / excess if excess > 0 else 0.0
+
+    return share(held0, held1), share(train0, train1)
+
+
+def _initial(pb: Problem, data: Dataset, theta, nominal) -> np.ndarray:
+    """Starting values of the nominal parameters that the data can give directly (the wire patterns'
+    rotations, where they are nominal), so the nominal fit starts in the right basin."""
+    theta = theta.copy()
+    if "pattern_rotation" in nominal:
+        sl = pb.spec.slices()["pattern_rotation"]
+        theta[sl] = initial_pattern_rotation(pb.model.structure, pb._phys_np, data)
+    return theta
+
+
+def initial_pattern_rotation(structure, phys0, data: Dataset) -> np.ndarray:
+    """Each segment's wire-pattern rotation (S,) from the data's linear response: regressing the tip's
+    lateral position on the commands, pulling wire ``k`` moves the tip toward the wire's angle (with
+    the default routing, every segment it crosses bends that way); per segment, the circular mean of
+    (that direction - the declared angle). No labels needed."""
+    X = np.c_[np.ones(data.n_samples), data.q]
+    coef, *_ = np.linalg.lstsq(X, data.p[:, :2], rcond=None)
+    M = -coef[1:]  # (N, 2): tip motion per mm of pull
+    own = np.asarray(phys0["route_angles"])[np.arange(structure.n_wires), structure.owner]
+    dirs = np.arctan2(M[:, 1], M[:, 0]) - own
+    weight = np.linalg.norm(M, axis=1)
+    out = np.zeros(structure.n_segments)
+    for j in range(structure.n_segments):
+        k = structure.owner == j
+        z = np.sum(weight[k] * np.exp(1j * dirs[k]))
+        out[j] = np.angle(z) if abs(z) > 0 else 0.0
+    return out
+
+
+def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
+    """The model's prediction in the robot's base frame (no registration): where the tip is, for the
+    residual's features."""
+    th = np.asarray(theta).copy()
+    sl = pb.spec.slices()
+    for name in ("registration", "marker"):
+        if name in sl:
+            th[sl[name]] = pb.null[sl[name]]
+    return pb.predict(th, [a for a in active if a not in ("registration", "marker")])
+
+
+#: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.
+GLITCH_C = 8.0
+
+
+def _glitch_weights(r, sigma):
+    n = np.linalg.norm(r, axis=1)
+    c = max(GLITCH_C * float(np.mean(sigma)), 5.0 * float(np.median(n)))
+    return np.where(n <= c, 1.0, 0.0)
+
+
+def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
+    """The tip positions (N, 3) a calibration report's final model predicts for ``data`` (a recording
+    of ``robot``, e.g. new commands or a validation file; path-dependent state starts afresh)."""
+    from .effects import BY_NAME
+
+    robot = Robot(robot) if isinstance(robot, Design) else robot
+    m = report["model"]
+    pb = Problem(RobotModel.of(robot), robot, data, tuple(BY_NAME[n] for n in m["blocks"]))
+    return pb.predict(np.asarray(m["theta"], float), m["active"])

@@ -1,0 +1,79 @@
+"""The robot as the calibration loop sees it: declared parameters, per-sample inputs, predictions.
+
+A *model* is any hashable object with
+
+* ``physical(robot) -> phys``: the declared physical parameters, a dict pytree;
+* ``inputs(data) -> inputs``: per-sample arrays (sample axis first) derived from a ``Dataset``;
+* ``predict(phys, inputs) -> {"p": (N, 3), "R": (N, 3, 3)}``: the tip for every sample;
+* ``structure``: the static wire counts (:class:`~tension_zones.model.Structure`) the effects read.
+
+:class:`RobotModel` is the package's: the equilibrium of :mod:`tension_zones.model._equilibrium`
+for any number of segments, one ``vmap`` over the samples.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import jax
+import jax.numpy as jnp
+
+from ..model import Robot, Structure
+from ..model._equilibrium import solve
+from ..model._robot import chain_tip
+from ._data import Dataset
+
+
+def motion_direction(q, reset=None):
+    """Last direction of motion of each wire, (N, n): +1 released, -1 pulled in, 0 not yet moved.
+
+    A stationary sample keeps the previous direction (that is what friction and backlash remember);
+    ``reset`` (N,) 0/1 restarts it where a recording starts.
+    """
+    q = jnp.asarray(q)
+    reset = jnp.zeros(q.shape[0], q.dtype) if reset is None else jnp.asarray(reset, q.dtype)
+    dq = jnp.diff(q, axis=0, prepend=q[:1])
+
+    def step(prev, xs):
+        d, r = xs
+        prev = jnp.where(r > 0, 0.0, prev)
+        cur = jnp.where(d > 0, 1.0, jnp.where(d < 0, -1.0, prev))
+        cur = jnp.where(r > 0, 0.0, cur)
+        return cur, cur
+
+    _, out = jax.lax.scan(step, jnp.zeros(q.shape[1], q.dtype), (dq, reset))
+    return out
+
+
+@dataclasses.dataclass(frozen=True)
+class RobotModel:
+    """Any robot of the package (one segment or many) for the loop; hashable (only its wire counts)."""
+
+    structure: Structure
+
+    @classmethod
+    def of(cls, robot: Robot) -> RobotModel:
+        return cls(robot.structure)
+
+    def physical(self, robot: Robot) -> dict:
+        if robot.structure != self.structure:
+            raise ValueError(f"the robot has wire counts {robot.n_wires_per_segment}, the model "
+                             f"{self.structure.n_wires_per_segment}")
+        return robot.params()
+
+    def inputs(self, data: Dataset) -> dict:
+        if data.n_wires != self.structure.n_wires:
+            raise ValueError(f"the data have {data.n_wires} wire columns, the robot {self.structure.n_wires} wires")
+        q = jnp.asarray(data.q)
+        reset = jnp.asarray(data.reset, q.dtype)
+        return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset}
+
+    def predict(self, phys, inputs):
+        """Tip positions and orientations for all samples (one vmap over the equilibrium)."""
+        st = self.structure
+        # one flag for all samples (outside the vmap): unloaded robots take the cheap path
+        loaded = jnp.any(inputs["f"] != 0) | jnp.any(phys["gravity"] != 0)
+        B = jax.vmap(lambda q, f, d: solve(phys, st, q, f, d, loaded=loaded))(
+            inputs["q"], inputs["f"], inputs["direction"])
+        p, R = jax.vmap(lambda b: chain_tip(phys["length"], b))(B)
+        return {"p": p, "R": R}

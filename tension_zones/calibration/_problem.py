@@ -1,0 +1,243 @@
+"""A model with effects as one flat parameter vector, fitted by the package's one least-squares solver.
+
+Effects (:mod:`.effects`) transform the physical parameters, then the inputs, then the predicted
+tip. Every block (nominal parameters and every candidate) is always present in the compiled function;
+a 0/1 mask over the parameter vector says which are free and a 0/1 per block which are part of the
+model being evaluated; the rest stay at their null values. So one compilation serves the whole loop:
+new values, another active set or another data set of similar size never recompile.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._lsq import levenberg_marquardt
+
+
+@dataclasses.dataclass(frozen=True)
+class Spec:
+    """The static part: a model and its blocks (nominal first), with their sizes."""
+
+    model: object
+    blocks: tuple
+    sizes: tuple
+
+    @property
+    def offsets(self):
+        return tuple(int(x) for x in np.cumsum((0,) + self.sizes)[:-1])
+
+    def slices(self):
+        return {b.name: slice(o, o + s) for b, o, s in zip(self.blocks, self.offsets, self.sizes)}
+
+
+def _split(spec: Spec, theta):
+    return [theta[o:o + s] for o, s in zip(spec.offsets, spec.sizes)]
+
+
+def predict_theta(spec: Spec, theta, on, phys0, inputs):
+    """The tip (``{"p", "R"}``, sample axis first) for the parameter vector ``theta`` and the blocks
+    ``on`` (B,) 0/1, all blocks applied in stages (parameters, inputs, outputs)."""
+    parts = _split(spec, theta)
+    on = {b.name: on[i] for i, b in enumerate(spec.blocks)}
+    m = spec.model
+    phys = phys0
+    for blk, th in zip(spec.blocks, parts):
+        phys = blk.on_params(th, phys, m, on)
+    for blk, th in zip(spec.blocks, parts):
+        inputs = blk.on_inputs(th, inputs, m, on)
+    out = m.predict(phys, inputs)
+    for blk, th in zip(spec.blocks, parts):
+        out = blk.on_outputs(th, out, m, on)
+    return out
+
+
+@partial(jax.jit, static_argnums=0)
+def engine(spec, theta0, free, on, w, c, lo, hi, phys0, inputs, y, max_iter):
+    """The one compiled function of the loop: a fit of the free parameters (``max_iter = 0`` only
+    evaluates, so predictions and score tests need no compilation of their own), then the residuals
+    (N, 3) and their Jacobian (N, 3, P) at the result. See :func:`tension_zones._lsq.levenberg_marquardt`."""
+    fun = lambda th: predict_theta(spec, th, on, phys0, inputs)["p"] - y  # noqa: E731
+    return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter)
+
+
+def compilations() -> int:
+    """How many programs the engine has compiled in this process (a test counts them)."""
+    return engine._cache_size()
+
+
+#: Sample counts are padded up to a multiple of this (padding repeats the last sample at zero weight,
+#: after the real ones, so path-dependent state is untouched): sets of similar size share one program.
+PAD = 64
+
+
+def _pad(data):
+    """The data set with every per-sample array padded (a ``Dataset`` stays a ``Dataset``)."""
+    n = data.n_samples
+    extra = (-n) % PAD
+
+    def rep(a):
+        return np.concatenate([a, np.repeat(a[-1:], extra, axis=0)])
+
+    changes = {f.name: rep(np.asarray(getattr(data, f.name))) for f in dataclasses.fields(data)
+               if isinstance(getattr(data, f.name), np.ndarray) and getattr(data, f.name).shape[:1] == (n,)}
+    if data.groups is not None:
+        changes["groups"] = tuple(data.groups) + (data.groups[-1],) * extra
+    return dataclasses.replace(data, **changes)
+
+
+class Problem:
+    """A model, its blocks and one data set, ready to fit: the NumPy edge around the jitted core."""
+
+    def __init__(self, model, robot, data, blocks):
+        self.model = model
+        self.data = data
+        self.n = data.n_samples
+        padded = _pad(data)
+        self.phys0 = model.physical(robot)
+        phys_np = jax.tree_util.tree_map(np.asarray, self.phys0)
+        sizes = tuple(int(b.size(model, phys_np)) for b in blocks)
+        self.spec = Spec(model=model, blocks=tuple(blocks), sizes=sizes)
+        self.inputs = model.inputs(padded)
+        self.y = jnp.asarray(padded.p)
+        self.n_padded = padded.n_samples
+        self.null = np.concatenate([b.null(model, phys_np) for b in blocks])
+        self.lo = np.concatenate([b.bounds(model, phys_np)[0] for b in blocks])
+        self.hi = np.concatenate([b.bounds(model, phys_np)[1] for b in blocks])
+        self._phys_np = phys_np
+
+    @property
+    def names(self):
+        return [b.name for b in self.spec.blocks]
+
+    def mask(self, active) -> np.ndarray:
+        """0/1 over the parameter vector: the blocks named in ``active`` are free."""
+        m = np.zeros(self.null.shape[0])
+        sl = self.spec.slices()
+        for name in active:
+            m[sl[name]] = 1.0
+        return m
+
+    def on(self, active) -> np.ndarray:
+        return np.array([1.0 if b.name in active else 0.0 for b in self.spec.blocks])
+
+    def _run(self, theta0, active, free, weights, huber_c, max_iter):
+        theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
+        w = np.zeros(self.n_padded)
+        w[: self.n] = weights  # padded samples never count
+        out = engine(self.spec, jnp.asarray(theta0), jnp.asarray(free), jnp.asarray(self.on(active)),
+                     jnp.asarray(w), jnp.asarray(huber_c, float), jnp.asarray(self.lo), jnp.asarray(self.hi),
+                     self.phys0, self.inputs, self.y, jnp.asarray(max_iter))
+        th, cost, it, r, J = (np.asarray(x) for x in out)
+        return th, cost, it, r[: self.n], J[: self.n]
+
+    def jacobian(self, theta, active):
+        """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta`` of the model made of ``active``."""
+        _, _, _, r, J = self._run(theta, active, np.zeros(self.null.shape[0]), np.zeros(self.n), np.inf, 0)
+        return r, J
+
+    def residuals(self, theta, active) -> np.ndarray:
+        return self.jacobian(theta, active)[0]
+
+    def predict(self, theta, active) -> np.ndarray:
+        return self.residuals(theta, active) + np.asarray(self.y)[: self.n]
+
+    def fit(self, theta0, active, weights, huber_c=np.inf, max_iter=40) -> np.ndarray:
+        """Fit the blocks named in ``active`` (the others stay where ``theta0`` has them)."""
+        return self._run(theta0, active, self.mask(active), weights, huber_c, max_iter)[0]
+
+    def labels(self, names) -> list[str]:
+        """``block.label`` of every parameter of the named blocks, in vector order."""
+        out = []
+        for b in self.spec.blocks:
+            if b.name in names:
+                out += [f"{b.name}.{lab}" for lab in b.labels(self.model, self._phys_np)]
+        return out
+
+    def describe(self, theta, names) -> dict:
+        """``{block: {label: value}}`` in report units, for the named blocks."""
+        out = {}
+        sl = self.spec.slices()
+        for b in self.spec.blocks:
+            if b.name in names:
+                vals = b.report_values(np.asarray(theta)[sl[b.name]], self.model, self._phys_np)
+                out[b.name] = {k: float(v) for k, v in zip(b.labels(self.model, self._phys_np), np.ravel(vals))}
+        return out
+
+    def describe_std(self, theta, names, std) -> dict:
+        """Standard deviations ``std`` (P,) of the parameters, in report units (each block's report
+        transform is elementwise, so its slope converts them)."""
+        out = {}
+        sl = self.spec.slices()
+        theta = np.asarray(theta, float)
+        for b in self.spec.blocks:
+            if b.name in names:
+                th, sd = theta[sl[b.name]], np.asarray(std)[sl[b.name]]
+                h = 1e-6 * np.maximum(np.abs(th), 1.0)
+                slope = (np.ravel(b.report_values(th + h, self.model, self._phys_np))
+                         - np.ravel(b.report_values(th - h, self.model, self._phys_np))) / (2 * h)
+                out[b.name] = {k: (float(v) if np.isfinite(v) else None)
+                               for k, v in zip(b.labels(self.model, self._phys_np), np.abs(slope) * sd)}
+        return out
+
+    def at_bounds(self, theta, names, tol: float = 0.01) -> list[str]:
+        """Labels of the named blocks' parameters within ``tol`` of their range from a bound (a bound
+        that is also the null value, e.g. a play of 0, does not count)."""
+        out = []
+        lab = self.labels(names)
+        cols = np.flatnonzero(self.mask(names))
+        for c, name in zip(cols, lab):
+            lo, hi, v = self.lo[c], self.hi[c], float(theta[c])
+            span = hi - lo
+            if not np.isfinite(span):
+                continue
+            near = (v <= lo + tol * span and lo != self.null[c]) or (v >= hi - tol * span and hi != self.null[c])
+            if near:
+                out.append(name)
+        return out
+
+
+def parameter_std(J, r, free, weights) -> np.ndarray:
+    """Linearised standard deviations (P,) of the free parameters (0 for the others).
+
+    ``cov = s^2 (J' W J)^-1`` over the free columns, ``s^2`` the residual variance per axis with the
+    degrees of freedom of the fit; a pseudo-inverse so a pair that trades off shows large deviations
+    instead of failing. Consecutive samples are correlated and the model is never exact, so these are
+    optimistic.
+    """
+    cols = np.flatnonzero(np.asarray(free) > 0)
+    w = np.asarray(weights, float)
+    Jf = (J[:, :, cols] * np.sqrt(w)[:, None, None]).reshape(-1, len(cols))
+    rw = (r * np.sqrt(w)[:, None]).ravel()
+    dof = max(int(3 * np.count_nonzero(w)) - len(cols), 1)
+    s2 = float(rw @ rw) / dof
+    std = np.zeros(J.shape[-1])
+    std[cols] = np.sqrt(np.maximum(np.diag(np.linalg.pinv(Jf.T @ Jf)) * s2, 0.0))
+    dead = cols[np.abs(Jf).max(axis=0, initial=0.0) == 0]  # a parameter the model ignores (see effects)
+    std[dead] = np.nan
+    return std
+
+
+def correlations(J, free, weights, labels, top: int = 5) -> dict:
+    """Identifiability: correlations of the free parameters from the Gauss-Newton covariance
+    ``(J' W J)^-1``. ``max_abs`` near 1 means a pair trades off freely; ``pairs`` are the ``top``
+    largest ``|corr|`` with the parameters' labels (``labels`` of the free columns, in order)."""
+    cols = np.flatnonzero(np.asarray(free) > 0)
+    w = np.asarray(weights, float)
+    Jf = (J[:, :, cols] * np.sqrt(w)[:, None, None]).reshape(-1, len(cols))
+    live = np.abs(Jf).max(axis=0, initial=0.0) > 0  # parameters the model ignores have no correlation
+    Jf, labels = Jf[:, live], [lab for lab, ok in zip(labels, live) if ok]
+    A = Jf.T @ Jf
+    cov = np.linalg.pinv(A + 1e-14 * np.trace(A) / max(len(A), 1) * np.eye(len(A)))
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    C = cov / np.outer(d, d)
+    iu = np.triu_indices(len(C), 1)
+    if not len(iu[0]):
+        return {"max_abs": 0.0, "pairs": []}
+    order = np.argsort(-np.abs(C[iu]))[:top]
+    pairs = [{"a": labels[iu[0][o]], "b": labels[iu[1][o]], "corr": float(C[iu][o])} for o in order]
+    return {"max_abs": float(np.abs(C[iu]).max()), "pairs": pairs}

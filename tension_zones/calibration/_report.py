@@ -1,0 +1,258 @@
+"""Writing a calibration's outcome: ``report.json``, ``report.md`` and the plots, for any robot.
+
+Plots: the residual against the bending direction and against the direction of motion, before and
+after the effects (``residual_vs_*.png``), and the measured against the predicted tip path
+(``tip_paths.png``: on the validation file when one is given, else on the held-out part).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ._loop import EXCESS_RATIO, STRUCTURE_Z, Result
+
+PLOTS = {
+    "bending_direction": "residual_vs_bending_direction.png",
+    "motion": "residual_vs_motion.png",
+}
+PATHS_PLOT = "tip_paths.png"
+#: The files a report folder holds (a new report never silently replaces them).
+FILES = ("report.json", "report.md", *PLOTS.values(), PATHS_PLOT)
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _components(r, feats):
+    """Residual (N, 3) as radial (along the bending direction), tangential and axial parts."""
+    c, s = np.cos(feats["bending_direction"]), np.sin(feats["bending_direction"])
+    return np.stack([c * r[:, 0] + s * r[:, 1], -s * r[:, 0] + c * r[:, 1], r[:, 2]], axis=1)
+
+
+def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
+    """Residual against bending direction and against direction of motion, before and after."""
+    plt = _pyplot()
+    pb, feats = res.problem, res.features
+    mask = res.train | res.held
+    comps = {"before (nominal fit)": _components(pb.residuals(res.theta_before, res.nominal), feats),
+             "after (" + (", ".join(e["name"] for e in res.effects) or "no effect added") + ")":
+                 _components(pb.residuals(res.theta_after, res.active), feats)}
+    lim = 1.1 * max(np.percentile(np.abs(c[mask]), 99.5) for c in comps.values())
+    xlabels = {"bending_direction": "bending direction (deg, base frame)",
+               "motion": "motion rel. to bending dir. (deg; 0 = bending further)"}
+    paths = []
+    for feat, fname in PLOTS.items():
+        x = np.degrees(feats[feat])
+        fig, axes = plt.subplots(2, 3, figsize=(13, 6.5), sharex=True, sharey=True)
+        for row, (title, c) in enumerate(comps.items()):
+            for col, lab in enumerate(["radial", "tangential", "axial (z)"]):
+                ax = axes[row, col]
+                ax.scatter(x[res.train], c[res.train, col], s=6, c="0.7", label="training")
+                ax.scatter(x[res.held], c[res.held, col], s=9, c="C3", label="held out")
+                ax.axhline(0.0, color="k", lw=0.6)
+                for sgn in (-1, 1):
+                    ax.axhline(sgn * 2 * np.mean(res.noise["sigma_mm"]), color="C0", lw=0.6, ls="--")
+                ax.set_ylim(-lim, lim)
+                ax.set_title(f"{title}: {lab}", fontsize=9)
+                if col == 0:
+                    ax.set_ylabel("residual (mm)")
+                if row == 1:
+                    ax.set_xlabel(xlabels[feat], fontsize=8)
+        axes[0, 0].legend(fontsize=7, loc="upper right")
+        fig.suptitle(f"{Path(pb.data.source).name}: measured - predicted tip position "
+                     f"(dashed: +-2 noise sigma)", fontsize=10)
+        fig.tight_layout()
+        path = out_dir / fname
+        _save(fig, path)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def plot_paths(res: Result, out_dir: Path) -> Path:
+    """Measured vs predicted tip paths (validation file, else the held-out part): top view and
+    x, y, z in acquisition order, with the best black-box baseline where there is one."""
+    plt = _pyplot()
+    on_val = bool(res.val.any())
+    mask = res.val if on_val else res.held
+    m = res.problem.data.p[mask]
+    p = res.predicted()[mask]
+    err = float(np.sqrt(np.mean(np.sum((p - m) ** 2, axis=1))))
+    what = "validation file" if on_val else "held-out part"
+    best = None
+    if on_val and res.baselines:
+        best = min(res.baselines.items(), key=lambda kv: kv[1]["rmse_validate_mm"])
+    fig = plt.figure(figsize=(13, 6.5))
+    ax = fig.add_subplot(1, 2, 1)
+    ax.plot(m[:, 0], m[:, 1], ".-", color="k", lw=0.6, ms=2.5, label="measured")
+    ax.plot(p[:, 0], p[:, 1], ".-", color="C3", lw=0.6, ms=2.5, label=f"model ({err:.2f} mm RMSE)")
+    if best:
+        bp = np.asarray(best[1]["predicted"])
+        ax.plot(bp[:, 0], bp[:, 1], "-", color="C0", lw=0.5, alpha=0.6,
+                label=f"{best[0]} baseline ({best[1]['rmse_validate_mm']:.2f} mm)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("tip x (mm)")
+    ax.set_ylabel("tip y (mm)")
+    ax.set_title(f"{what}, top view")
+    ax.legend(fontsize=8, loc="best")
+    for i, c in enumerate("xyz"):
+        axi = fig.add_subplot(3, 2, 2 * i + 2)
+        axi.plot(m[:, i], color="k", lw=0.8, label="measured")
+        axi.plot(p[:, i], color="C3", lw=0.8, label="model")
+        axi.set_ylabel(f"tip {c} (mm)")
+        if i == 2:
+            axi.set_xlabel(f"sample of the {what}")
+        if i == 0:
+            axi.legend(fontsize=8, loc="upper right")
+            axi.set_title("measured vs predicted, in acquisition order")
+    fig.tight_layout()
+    path = out_dir / PATHS_PLOT
+    _save(fig, path)
+    plt.close(fig)
+    return path
+
+
+def _save(fig, path: Path) -> None:
+    """Write a figure atomically (a temporary name in the same folder, then a rename)."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    fig.savefig(tmp, dpi=110, format="png")
+    os.replace(tmp, path)
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def _fmt_params(params: dict, std: dict | None = None) -> str:
+    std = std or {}
+    return ", ".join(f"{k} = {v:.4g}" + (f" +- {std[k]:.2g}" if std.get(k) is not None else "") for k, v in params.items())
+
+
+def _f(x, nd=4):
+    return "-" if x is None else f"{x:.{nd}f}"
+
+
+def markdown(report: dict) -> str:
+    nf = report["noise_floor_mm"]
+    val = "rmse_validate_mm" in report
+    lines = [f"# Calibration report: `{Path(report['data']).name}`", ""]
+    lines += [f"{report['n_samples']} samples ({report['dropped_rows']} bad rows dropped); training: "
+              f"{report['n_train']}, held out: {report['n_held_out']} ({report['holdout']}). "
+              + (f"Validation: `{Path(report['validate']).name}`, {report['n_validate']} samples, only predicted "
+                 "after the selection. " if val and report.get("validate") else "")
+              + f"Loss: {'Huber (robust)' if report['robust'] else 'least squares'}. "
+              f"Nominal parameters always fitted: {', '.join(report['nominal_parameters'])}.", ""]
+    lines += ["## Before and after (tip-position RMSE, mm)", "",
+              "| model | held out | / noise floor |" + (" validation | validation, mean offset removed |" if val else ""),
+              "| --- | ---: | ---: |" + (" ---: | ---: |" if val else ""),
+              f"| declared design, nothing fitted | {_f(report['rmse_declared_mm'])} | "
+              f"{report['rmse_declared_mm'] / nf:.2f} |" + (" | |" if val else "")]
+    for i, s in enumerate(report["steps"]):
+        name = "nominal parameters fitted" if i == 0 else "+ " + " + ".join(s["effects"])
+        lines.append(f"| {name} | {_f(s['rmse_held_out_mm'])} | {s['rmse_held_out_mm'] / nf:.2f} |"
+                     + (f" {_f(s['rmse_validate_mm'])} | {_f(s['rmse_validate_aligned_mm'])} |" if val else ""))
+    lines += [f"| noise floor ({report['noise']['method']}, {report['noise']['pairs']} pairs) | {nf:.4f} | 1 |"
+              + (" | |" if val else ""), ""]
+    if val and report.get("baselines"):
+        lines += ["Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the "
+                  "training data):", "", "| baseline | choice | held out | validation | validation aligned |",
+                  "| --- | --- | ---: | ---: | ---: |"]
+        for k, b in report["baselines"].items():
+            lines.append(f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
+                         f"{_f(b['rmse_validate_aligned_mm'])} |")
+        lines.append("")
+    lines += ["## What was found", ""]
+    if report["effects"]:
+        for e in report["effects"]:
+            lines.append(f"- **{e['name']}**: {_fmt_params(e['params'], e.get('params_std'))}")
+    else:
+        lines.append("- No effect of the library improved the held-out error significantly: none added.")
+    lines += [f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}** "
+              f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor).", ""]
+    if report["parameters"].get("at_bound"):
+        lines += [f"Parameters at a bound (their deviations are not meaningful): "
+                  f"{', '.join(report['parameters']['at_bound'])}.", ""]
+    c = report["correlations"]
+    if c["pairs"]:
+        lines += ["Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
+                  + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + ".", ""]
+    lines += ["## Evidence", "",
+              "Score test on the held-out residual (z-value of the chi-square statistic of the residual "
+              "projected on the effect's parameter sensitivities; higher = explains more), then the "
+              "refit on the training part and the held-out check:", ""]
+    for rd in report["rounds"]:
+        sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
+        lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
+                     + ", ".join(f"{c['name']} {c['score']:.1f}" for c in sc) + ".")
+        lines.append("")
+        for t in rd["tried"]:
+            verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
+                                                    else "not significant")
+            lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
+                         f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
+                         f"{t['needed']:.1f}) -> {verdict}")
+        for t in rd.get("removed", []):
+            lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
+                         f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
+                         "effect and is removed")
+        if not rd["tried"]:
+            lines.append("- no candidate significant: the loop stops.")
+        lines.append("")
+    lines += ["Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
+              f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):", "",
+              "| input | variance explained | z |", "| --- | ---: | ---: |"]
+    for k, v in report["structure"].items():
+        if "explained" in v:
+            lines.append(f"| {k} | {v['explained']:.3f} | {v['z']:.1f} |")
+    m = report["structure"]["mean"]
+    ex = report["structure"]["excess_over_noise"]
+    lines += [f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
+              f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
+    lines += ["## Final parameters", "",
+              "`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
+              "in report units; `std`: linearised standard deviations from the training fit (optimistic: "
+              "consecutive samples are correlated).", "", "```", json.dumps(report["parameters"], indent=1), "```",
+              "", "## Plots", ""]
+    for f in report["plots"]:
+        lines.append(f"![{f}]({f})")
+    return "\n".join(lines) + "\n"
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {k: _jsonable(v) for k, v in x.items() if k != "predicted"}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.floating, np.integer, np.bool_)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return x
+
+
+def write_report(res: Result, out_dir, **extra) -> dict:
+    """Write ``report.json``, ``report.md`` and the plots into ``out_dir``; return the JSON dict.
+
+    ``extra`` keys (e.g. ``design``, ``validate``: the files used) go into the report as they are.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    report = res.to_json()
+    report.update(extra)
+    report["plots"] = [p.name for p in plot_residuals(res, out)] + [plot_paths(res, out).name]
+    report = _jsonable(report)
+    _write_text(out / "report.json", json.dumps(report, indent=1))
+    _write_text(out / "report.md", markdown(report))
+    return report

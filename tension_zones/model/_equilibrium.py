@@ -1,0 +1,356 @@
+"""The equilibrium of a robot under commanded wire displacements and loads (MODEL.md Sec. 5, chained).
+
+One solver for every robot, one segment or many. A configuration is ``x = vec(B)`` (2S,), the
+segments' bending vectors. Commanded wire displacements ``q`` (N,) (negative = pulled in), a known
+tip force ``f`` (3,) and the robot's weight per unit length ``g`` (3,) (N/mm, base frame) give
+``B* = argmin V``,
+
+    V(x) = sum_j EI_j |b_j|^2 / (2 L_j) + sum_k (t_k k_k / 2) max(s_k, 0)^2
+           - f . p_tip(x) - g . sum_j int_{segment j} p ds,
+    s_k  = (l_k(x) - l_k(0)) - q_k + f_pre,k / k_k               (pull only: a slack wire carries nothing)
+
+(the weight is integrated exactly along each arc, :func:`~._kinematics.segment_weight_moment`).
+``t_k`` is the share of a wire's tension that reaches its segments past friction along the routing
+(capstan): ``t_k = exp(d_k (mu_0 + mu_1 w_k))`` with ``d_k`` the wire's last direction of motion (+1
+released, -1 pulled in, 0 not yet moved), ``mu_0`` the routing before the robot and ``mu_1`` per
+radian of the bending ``w_k = sum_{j crossed} |b_j|`` the wire wraps around in the segments it
+crosses. Without friction (``mu = 0``) the problem is the energy minimisation of MODEL.md; with it,
+``t`` depends on ``x`` and the equilibrium is the root of the generalised force ``F(x)`` (``grad V``
+with ``t = t(x)``), which the Newton iteration below reaches as a fixed point.
+
+**Solver.** Damped Newton on ``V`` (``t`` frozen at the iterate) with the generalised Hessian made
+positive definite (eigenvalues floored), and a branch-free line search: ten step sizes evaluated at
+once, the largest that satisfies Armijo's condition taken. ``max(s, 0)^2`` is only C1, so Newton is
+exact within a set of taut wires and the line search handles set changes. The derivatives come from
+the implicit function theorem on ``F(x*) = 0`` (``lax.custom_root``), never from the iterations.
+Per sample; ``vmap`` it.
+
+Physical parameters are the flat dict of :meth:`Robot.params` (``length``, ``EI`` (S,);
+``route_angles``, ``route_radii`` (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,);
+``gravity`` (3,)); the calibration's effects change them, so the solver works on that dict and a
+:class:`~._robot.Structure` (the static wire counts).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._kinematics import segment_J_xb, segment_pose, segment_weight_moment, segment_weight_moment_jacobian
+from .._numerics import skew
+from ._robot import Robot, Structure, chain_poses, routing_matrix
+
+#: Newton iterations at most (a piecewise-quadratic problem converges in a handful; set changes and
+#: large bending take more).
+MAX_ITER = 50
+#: Largest change of a bending-vector component in one Newton step (rad): far from the equilibrium
+#: of a loaded robot a Newton step can be huge; the line search then starts from this.
+MAX_STEP = 0.5
+#: Step sizes of the line search, all evaluated at once (no value-dependent branching).
+_STEPS = 2.0 ** -np.arange(10)
+
+
+@dataclasses.dataclass(frozen=True)
+class Load:
+    """External load in the base frame: ``tip_force`` (3,) N at the tip and ``gravity`` (3,) N/mm,
+    the robot's weight per unit length (distributed exactly along every segment)."""
+
+    tip_force: jax.Array
+    gravity: jax.Array
+
+    @classmethod
+    def none(cls, dtype=None) -> Load:
+        z = jnp.zeros(3, dtype or jnp.result_type(float))
+        return cls(z, z)
+
+
+jax.tree_util.register_pytree_node(
+    Load, lambda x: ((x.tip_force, x.gravity), None), lambda _, c: Load(*c)
+)
+
+
+def _guarded_norm(b):
+    """``|b|`` with a zero (not NaN) gradient at ``b = 0`` (double ``where``)."""
+    s = jnp.sum(b * b, axis=-1)
+    nz = s > 0
+    return jnp.where(nz, jnp.sqrt(jnp.where(nz, s, 1.0)), 0.0)
+
+
+def load_potential(lengths, x, f, g):
+    """``-f . p_tip - g . sum_j int p ds`` (N mm) for the configuration ``x`` (2S,)."""
+    B = x.reshape(-1, 2)
+    dt = x.dtype
+    p, R = jnp.zeros(3, dt), jnp.eye(3, dtype=dt)
+    moment = jnp.zeros(3, dt)
+    for j in range(B.shape[0]):
+        moment = moment + lengths[j] * p + R @ segment_weight_moment(lengths[j], B[j])
+        pj, Rj = segment_pose(lengths[j], B[j])
+        p, R = p + R @ pj, R @ Rj
+    return -jnp.dot(f, p) - jnp.dot(g, moment)
+
+
+def load_jacobians(lengths, x):
+    """``(d p_tip / d x, d M / d x)``, each (3, 2S), in closed form along the chain; ``M`` is the
+    backbone's first moment ``sum_j int p ds`` (what a uniform weight acts on). The load's gradient is
+    ``-(G_tip^T f + G_M^T g)``.
+
+    Bending segment ``i`` moves everything distal to its end disk ``p_{i+1}`` by its world-frame
+    Jacobian ``[J_v; J_w]`` (rotated by its base rotation ``R_i``): a point ``X`` distal to it moves by
+    ``J_v + omega x (X - p_{i+1})``. The tip force sees ``X = p_tip``; the weight sees each distal
+    segment's first moment ``M_j = L_j p_j + R_j int p ds`` (moving like ``L_j`` points at its
+    centroid) and segment ``i``'s own ``R_i d(int p ds)/d b_i``. (No reverse-mode autodiff: the
+    load term's Hessian by differences of this compiles several times smaller.)
+    """
+    B = x.reshape(-1, 2)
+    S = B.shape[0]
+    ps, Rs = chain_poses(lengths, B)
+    tip = ps[-1]
+    moments = [lengths[j] * ps[j] + Rs[j] @ segment_weight_moment(lengths[j], B[j]) for j in range(S)]
+    Gt, Gm = [], []
+    for i in range(S):
+        J = segment_J_xb(lengths[i], B[i])
+        Jv, Jw = Rs[i] @ J[:3], Rs[i] @ J[3:]
+        end = ps[i + 1]
+        L_out = sum((lengths[j] for j in range(i + 1, S)), jnp.zeros((), x.dtype))
+        M_out = sum((moments[j] for j in range(i + 1, S)), jnp.zeros(3, x.dtype))
+        Gt.append(Jv - skew(tip - end) @ Jw)
+        Gm.append(L_out * Jv - skew(M_out - L_out * end) @ Jw
+                  + Rs[i] @ segment_weight_moment_jacobian(lengths[i], B[i]))
+    return jnp.concatenate(Gt, axis=1), jnp.concatenate(Gm, axis=1)
+
+
+def load_gradient(lengths, x, f, g):
+    """``d load_potential / d x`` (2S,), closed form (:func:`load_jacobians`)."""
+    Gt, Gm = load_jacobians(lengths, x)
+    return -(Gt.T @ f + Gm.T @ g)
+
+
+class _Sample:
+    """The pieces of ``V`` and ``F`` for one sample, gradient and generalised Hessian written out.
+
+    ``loaded`` is a scalar that is *not* batched over samples (any tip force in the data, or a weight):
+    when it is false the load terms are skipped by a conditional (exactly zero then), which keeps an
+    unloaded robot's solve cheap while the derivatives with respect to a load stay exact (they need
+    only the load's Jacobians, not their change with the configuration)."""
+
+    def __init__(self, phys, structure: Structure, q, f, direction, loaded):
+        self.A = routing_matrix(phys["route_angles"], phys["route_radii"], structure.crosses)  # (N, 2S)
+        self.k = phys["wire_stiffness"]
+        self.c = -q + phys["preload"] / self.k  # s = A x + c
+        self.E = jnp.repeat(phys["EI"] / phys["length"], 2)
+        self.lengths = phys["length"]
+        self.f, self.g = f, phys["gravity"]
+        self.mu = phys["friction"]
+        self.direction = direction
+        self.crosses = jnp.asarray(structure.crosses, self.A.dtype)
+        self.loaded = loaded
+
+    def _if_loaded(self, fn, x, zero):
+        return jax.lax.cond(self.loaded, fn, lambda _: zero, x)
+
+    def factor(self, x):
+        """Share ``t_k`` (N,) of each wire's tension past friction along its routing."""
+        wrap = self.crosses @ _guarded_norm(x.reshape(-1, 2))
+        return jnp.exp(self.direction * (self.mu[0] + self.mu[1] * wrap))
+
+    def stretch(self, x):
+        return self.A @ x + self.c
+
+    def value(self, x, t):
+        s = self.stretch(x)
+        load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
+        return 0.5 * jnp.dot(self.E * x, x) + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
+
+    def grad(self, x, t):
+        tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
+        load = self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
+        return self.E * x + self.A.T @ tau + load
+
+    def _load_hessian(self, x):
+        """The load term's Hessian by central differences of its closed-form gradient: accurate to
+        ~1e-10 relative (Newton still converges to round-off, implicit derivatives carry that error);
+        its exact second derivatives would make the compiled program several times larger."""
+
+        def fd(x):
+            n = x.shape[0]
+            h = jnp.finfo(x.dtype).eps ** (1.0 / 3.0) * jnp.maximum(1.0, jnp.max(jnp.abs(x)))
+            E = h * jnp.eye(n, dtype=x.dtype)
+            G = jax.vmap(lambda y: load_gradient(self.lengths, y, self.f, self.g))(jnp.concatenate([x + E, x - E]))
+            H = (G[:n] - G[n:]).T / (2.0 * h)
+            return 0.5 * (H + H.T)
+
+        return self._if_loaded(fd, x, jnp.zeros((x.shape[0],) * 2, x.dtype))
+
+    def hess(self, x, t):
+        """Generalised Hessian of ``V`` with ``t`` frozen (the Newton step's matrix): exact for the
+        backbone and the wires, :meth:`_load_hessian` for the load."""
+        taut = (self.stretch(x) > 0).astype(x.dtype)
+        return jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A + self._load_hessian(x)
+
+    def force(self, x):
+        """The generalised force ``F(x)`` whose root is the equilibrium (``t`` depends on ``x``).
+
+        Its load part is ``-(G_tip^T f + G_M^T g)``; unloaded, the Jacobians ``G`` are constants (their
+        change multiplies ``f = g = 0``), so derivatives in ``f`` and ``g`` cost two products."""
+        t = self.factor(x)
+        tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
+
+        def loaded(y):
+            return load_gradient(self.lengths, y, self.f, self.g)
+
+        def unloaded(y):
+            Gt, Gm = jax.lax.stop_gradient(load_jacobians(self.lengths, y))
+            return -(Gt.T @ self.f + Gm.T @ self.g)
+
+        return self.E * x + self.A.T @ tau + jax.lax.cond(self.loaded, loaded, unloaded, x)
+
+    def force_jacobian(self, x):
+        """``dF/dx`` (2S, 2S): :meth:`hess` plus the friction share's own change with the bending,
+        ``dt_k/dx = t_k d_k mu_1 sum_j crossed d|b_j|/db_j``."""
+        t = self.factor(x)
+        B = x.reshape(-1, 2)
+        nb = _guarded_norm(B)
+        unit = B / jnp.where(nb > 0, nb, 1.0)[:, None]  # d|b|/db, 0 at b = 0
+        W = (self.crosses[:, :, None] * unit[None, :, :]).reshape(self.A.shape)  # (N, 2S): dw/dx
+        dt = (t * self.direction * self.mu[1])[:, None] * W
+        tension = self.k * jnp.maximum(self.stretch(x), 0.0)
+        return self.hess(x, t) + self.A.T @ (tension[:, None] * dt)
+
+
+def _newton(sm: _Sample, x0):
+    steps = jnp.asarray(_STEPS, x0.dtype)
+
+    def direction(H, g):
+        # unloaded, H is positive definite (backbone + taut wires): a Cholesky solve; loaded, it may
+        # not be (a load can destabilise): Newton on |eigenvalues| (at least 1e-3 of the largest), a
+        # descent direction of sensible length along a negative curvature too
+        def eig(Hg):
+            H, g = Hg
+            w, Q = jnp.linalg.eigh(H)
+            floor = 1e-3 * jnp.maximum(jnp.max(jnp.abs(w)), 1e-12)
+            return -Q @ ((Q.T @ g) / jnp.maximum(jnp.abs(w), floor))
+
+        def chol(Hg):
+            H, g = Hg
+            return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
+
+        return jax.lax.cond(sm.loaded, eig, chol, (H, g))
+
+    def body(state):
+        x, it, _ = state
+        t = sm.factor(x)
+        g, H = sm.grad(x, t), sm.hess(x, t)
+        d = direction(H, g)
+        d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
+        v0 = sm.value(x, t)
+        vs = jax.vmap(lambda s: sm.value(x + s * d, t))(steps)
+        # Armijo with a round-off allowance, so converged steps are not rejected by noise in V
+        ok = vs <= v0 + 1e-4 * steps * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
+        step = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0) * d
+        done = jnp.max(jnp.abs(step)) <= 1e-13 * (1.0 + jnp.max(jnp.abs(x)))
+        return x + step, it + 1, done
+
+    def cond(state):
+        return (state[1] < MAX_ITER) & ~state[2]
+
+    x, _, _ = jax.lax.while_loop(cond, body, (x0, jnp.asarray(0), jnp.asarray(False)))
+    return x
+
+
+@functools.lru_cache(maxsize=None)
+def _solver(structure: Structure):
+    """The implicitly differentiated solve for one robot structure (static)."""
+
+    def force(x, phys, q, f, direction, loaded):
+        return _Sample(phys, structure, q, f, direction, loaded).force(x)
+
+    @jax.custom_jvp
+    def solve_x(phys, q, f, direction, loaded, x0):
+        return _newton(_Sample(phys, structure, q, f, direction, loaded), x0)
+
+    @solve_x.defjvp
+    def solve_x_jvp(primals, tangents):
+        # Implicit function theorem on F(x*, p) = 0: dx = -(dF/dx)^-1 (dF/dp . dp); dF/dp . dp by
+        # forward mode at fixed x (x carries no tangent), dF/dx in closed form.
+        phys, q, f, direction, loaded, x0 = primals
+        x = solve_x(*primals)
+        _, rhs = jax.jvp(lambda *p: force(x, *p, loaded), primals[:4], tangents[:4])
+        Jx = _Sample(phys, structure, q, f, direction, loaded).force_jacobian(x)
+        return x, -jnp.linalg.solve(Jx, rhs)
+
+    return solve_x
+
+
+def solve(phys, structure: Structure, q, f, direction=None, x0=None, loaded=None):
+    """Equilibrium bending vectors ``B*`` (S, 2) of one sample, implicitly differentiable in ``phys``,
+    ``q``, ``f`` (the initial guess ``x0`` (2S,) is not differentiated).
+
+    Args: ``phys`` the physical parameters (:meth:`Robot.params` form); ``q`` (N,) commanded wire
+    displacements (mm); ``f`` (3,) tip force (N, base frame); ``direction`` (N,) the wires' last
+    directions of motion (only friction uses it; ``None`` = 0); ``loaded``: a bool scalar, false only
+    if neither this sample nor any other under the same ``vmap`` has a tip force and ``phys`` has no
+    weight (``None``: decided from this sample; pass it from outside a ``vmap`` over samples, where it
+    is one value for all, to keep unloaded robots cheap).
+    """
+    dt = jnp.result_type(phys["length"], q, float)
+    q = jnp.asarray(q, dt)
+    f = jnp.asarray(f, dt)
+    direction = jnp.zeros_like(q) if direction is None else jnp.asarray(direction, dt)
+    if loaded is None:
+        loaded = jnp.any(f != 0) | jnp.any(phys["gravity"] != 0)
+    S = structure.n_segments
+    x0 = jnp.zeros(2 * S, dt) if x0 is None else jax.lax.stop_gradient(jnp.asarray(x0, dt).reshape(-1))
+    return _solver(structure)(phys, q, f, direction, jax.lax.stop_gradient(loaded), x0).reshape(S, 2)
+
+
+# --------------------------------------------------------------------------------------------
+# The same for a Robot (the public, single-sample API)
+# --------------------------------------------------------------------------------------------
+def _phys(robot: Robot, load: Load | None):
+    phys = robot.params()
+    if load is not None:
+        phys["gravity"] = jnp.asarray(load.gravity, phys["length"].dtype)
+    f = jnp.zeros(3, phys["length"].dtype) if load is None else jnp.asarray(load.tip_force, phys["length"].dtype)
+    return phys, f
+
+
+def equilibrium(robot: Robot, q, load: Load | None = None, B0=None):
+    """Equilibrium bending vectors ``B*`` (S, 2) for one sample of wire displacements ``q`` (N,).
+
+    Differentiable in ``robot``, ``q`` and ``load`` by the implicit function theorem, forward and
+    reverse mode. ``vmap`` it over samples.
+    """
+    phys, f = _phys(robot, load)
+    return solve(phys, robot.structure, q, f, x0=B0)
+
+
+def forward(robot: Robot, q, load: Load | None = None):
+    """Commanded wire displacements (N,) -> equilibrium tip position (3,) and rotation (3, 3)."""
+    return robot.tip_pose(equilibrium(robot, q, load))
+
+
+def wire_stretch(robot: Robot, B, q):
+    """``s_k = (l_k - l_k(0)) - q_k + f_pre / k_w``, (N,), mm (MODEL.md Sec. 5)."""
+    return robot.wire_length_changes(B) - q + robot.preload / robot.wire_stiffness
+
+
+def wire_tensions(robot: Robot, B, q):
+    """Pull-only tensions ``k_w max(s, 0)``, (N,), N (no friction)."""
+    return robot.wire_stiffness * jnp.maximum(wire_stretch(robot, B, q), 0.0)
+
+
+def energy(robot: Robot, B, q, load: Load | None = None):
+    """Potential energy ``V(B)`` (N mm) for commanded wire displacements ``q`` (N,) (no friction)."""
+    phys, f = _phys(robot, load)
+    sm = _Sample(phys, robot.structure, jnp.asarray(q, phys["length"].dtype), f, jnp.zeros(robot.n_wires),
+                 jnp.asarray(True))
+    return sm.value(jnp.asarray(B, phys["length"].dtype).reshape(-1), jnp.ones(robot.n_wires))
+
+
+def equilibrium_J_pq(robot: Robot, q, load: Load | None = None):
+    """``d p_tip / d q`` at equilibrium, (3, N): slack wires give zero columns."""
+    return jax.jacfwd(lambda qq: forward(robot, qq, load)[0])(jnp.asarray(q, robot.route_angles.dtype))

@@ -1,0 +1,102 @@
+"""The one loop on robots of several segments, from the project's own generator (tests/simulator.py:
+an independent code path): two segments with 3 and 4 wires at uneven angles, servo ids shuffled,
+labelled patterns, recordings of several hundred samples in an unregistered tracker frame, and a
+validation file that moves every segment at once. Each candidate effect alone must be named and
+bring the validation error to the noise floor; a nominal robot gets nothing; an effect outside the
+library is flagged and not misnamed; the whole calibration compiles once."""
+
+import json
+
+import numpy as np
+import pytest
+from simulator import RobotTruth, write_robot_set
+
+import tension_zones as tz
+from tension_zones.calibration import calibrate, compilations, read_opencr
+from tension_zones.cli import main
+
+EFFECTS = {
+    "backlash": RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)),
+    "friction": RobotTruth(friction=(0.1, 0.3)),
+    "wire_angle_offset": RobotTruth(angle_offsets_deg=(4.0, -3.0, 2.0, -5.0, 3.0, 0.0, 4.0)),
+    "wire_stiffness": RobotTruth(stiffness_factors=(0.5, 1.0, 1.6, 1.0, 0.6, 1.4, 1.0)),
+    "preload": RobotTruth(d_preload=(6.0, -3.0, 0.0, 4.0, 0.0, -5.0, 2.0)),
+    "tip_force": RobotTruth(tip_force=(0.3, -0.2, -0.4)),
+    "gravity": RobotTruth(gravity=(0.0, 0.002, -0.003)),
+    "marker": RobotTruth(marker=(3.0, -2.0, 4.0)),
+    "geometry": RobotTruth(d_length=(2.0, -3.0), d_radius=(0.3, -0.4)),
+}
+
+
+def run(folder, name, truth, seed=3):
+    train_csv, val_csv, design = write_robot_set(folder, name, truth, seed=seed)
+    robot = tz.Robot.from_json(design)
+    train = read_opencr(train_csv, n_wires=robot.n_wires)
+    val = read_opencr(val_csv, n_wires=robot.n_wires, servo_ids=train.servo_ids)
+    before = compilations()
+    rep = calibrate(train, robot, validate=val).to_json()
+    assert compilations() - before <= 1  # adding, removing, refitting effects never recompiles
+    return rep
+
+
+def names(rep):
+    return [e["name"] for e in rep["effects"]]
+
+
+@pytest.mark.parametrize("effect", list(EFFECTS))
+def test_each_effect_alone_is_named_and_validation_reaches_the_noise(tmp_path, effect):
+    rep = run(tmp_path, effect, EFFECTS[effect])
+    assert names(rep) == [effect]
+    floor = rep["noise_floor_mm"]
+    assert rep["rmse_before_mm"] > 1.5 * floor  # the effect mattered
+    assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
+    assert not rep["unexplained_structure"]
+
+
+def test_nominal_robot_gets_nothing(tmp_path):
+    rep = run(tmp_path, "nominal", RobotTruth(), seed=5)
+    assert names(rep) == [] and not rep["unexplained_structure"]
+    assert rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
+    # the nominal parameters are the truth's: pattern rotations, registration, stiffness
+    fitted = rep["parameters"]["fitted"]
+    # (about the robot's axis the registration and a common pattern rotation are one quantity: the
+    # registration leaves it to the patterns, which then carry the tracker's rotation about z too)
+    rot = np.array(list(fitted["registration"].values()))
+    assert rot[2] == 0.0 and rep["parameters"]["std"]["registration"]["rot_z_deg"] is None
+    np.testing.assert_allclose(rot[:2], [1.0, -1.5], atol=0.3)
+    np.testing.assert_allclose(list(fitted["pattern_rotation"].values()), np.array([12.0, -20.0]) + 4.0, atol=0.5)
+
+
+def test_an_effect_outside_the_library_is_flagged_not_misnamed(tmp_path):
+    rep = run(tmp_path, "drift", RobotTruth(drift_mm=0.4))  # a slow tracker drift: no effect makes it
+    assert rep["unexplained_structure"] is True
+    assert names(rep) == []
+
+
+def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsys):
+    train, val, design = write_robot_set(tmp_path, "pre", EFFECTS["preload"], seed=7)
+    out = tmp_path / "out"
+    args = ["calibrate", str(train), "--format", "opencr", "--design", str(design), "--validate", str(val),
+            "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    rep = json.loads((out / "report.json").read_text())
+    for key in ("rmse_declared_mm", "rmse_before_mm", "rmse_after_mm", "effects", "candidates", "rounds",
+                "noise_floor_mm", "unexplained_structure", "parameters", "rmse_validate_mm",
+                "rmse_validate_aligned_mm", "steps", "baselines", "correlations", "holdout"):
+        assert key in rep, key
+    assert [e["name"] for e in rep["effects"]] == ["preload"]
+    assert rep["rmse_validate_aligned_mm"] <= rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
+    assert rep["steps"][-1]["rmse_validate_mm"] < rep["steps"][0]["rmse_validate_mm"]
+    assert "pattern group" in rep["holdout"]
+    # the preload recovered within 5 linearised standard deviations
+    got = np.array(list(rep["parameters"]["fitted"]["preload"].values()))
+    std = np.array(list(rep["parameters"]["std"]["preload"].values()))
+    assert np.all(np.abs(got - np.array(EFFECTS["preload"].d_preload)) < 5 * std + 0.05)
+    md = (out / "report.md").read_text()
+    assert "| + preload |" in md and "validation" in md
+    for png in rep["plots"]:
+        assert (out / png).stat().st_size > 10_000
+    assert "validation RMSE" in capsys.readouterr().out
+    # an existing report is not replaced without --force
+    assert main(args) == 2
+    assert "already holds a report" in capsys.readouterr().err

@@ -1,0 +1,65 @@
+"""The package's one least-squares solver (bounded, robust Levenberg-Marquardt, traced)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from tension_zones._lsq import levenberg_marquardt
+
+T = jnp.linspace(0.0, 1.0, 20)
+Y = 2.0 * jnp.exp(-1.5 * T)
+
+
+def _exp_fit(x):
+    return x[0] * jnp.exp(-x[1] * T) - Y
+
+
+def test_rejects_non_finite_steps():
+    """An exponential fit whose unconstrained path crosses a region where the residuals are NaN."""
+
+    def res(x):
+        return jnp.where(x[0] > 1.2, _exp_fit(x), jnp.nan)  # NaN "unstable" region below 1.2
+
+    x, cost, it, r, J = jax.jit(lambda x0: levenberg_marquardt(res, x0, max_iter=50, tol=1e-14))(
+        jnp.asarray([5.0, 0.1]))
+    np.testing.assert_allclose(np.asarray(x), [2.0, 1.5], rtol=1e-8)
+    assert int(it) > 1 and float(cost) < 1e-20 and r.shape == (20, 1) and J.shape == (20, 1, 2)
+
+
+def test_linear_least_squares_matches_numpy():
+    rng = np.random.default_rng(0)
+    A, y = rng.normal(size=(30, 4)), rng.normal(size=30)
+    x, *_ = levenberg_marquardt(lambda th: jnp.asarray(A) @ th - y, jnp.zeros(4), tol=1e-15)
+    np.testing.assert_allclose(x, np.linalg.lstsq(A, y, rcond=None)[0], atol=1e-10)
+
+
+def test_bounds_and_frozen_parameters():
+    # the unconstrained optimum (2, 1.5) lies outside x1 <= 1: the bound holds exactly
+    x, *_ = levenberg_marquardt(_exp_fit, jnp.asarray([1.0, 0.5]), lo=jnp.asarray([0.0, 0.0]),
+                                hi=jnp.asarray([10.0, 1.0]))
+    assert float(x[1]) == 1.0 and 0.0 < float(x[0]) < 10.0
+    # a frozen parameter stays where it starts; the other is the conditional optimum
+    x, *_ = levenberg_marquardt(_exp_fit, jnp.asarray([3.0, 1.5]), free=jnp.asarray([0.0, 1.0]))
+    assert float(x[0]) == 3.0 and abs(float(x[1]) - 1.5) > 0.1
+
+
+def test_huber_loss_resists_outliers():
+    rng = np.random.default_rng(1)
+    y = np.asarray(Y) + 0.01 * rng.normal(size=20)
+    y[[3, 11]] += 2.0  # two gross outliers
+    fun = lambda x: x[0] * jnp.exp(-x[1] * T) - y  # noqa: E731
+    ls, *_ = levenberg_marquardt(fun, jnp.asarray([1.0, 1.0]))
+    hub, *_ = levenberg_marquardt(fun, jnp.asarray([1.0, 1.0]), huber=0.05)
+    assert np.abs(np.asarray(hub) - [2.0, 1.5]).max() < 0.05 < np.abs(np.asarray(ls) - [2.0, 1.5]).max()
+
+
+def test_zero_iterations_only_evaluates_and_new_masks_do_not_recompile():
+    f = jax.jit(lambda x0, free, n: levenberg_marquardt(_exp_fit, x0, free=free, max_iter=n))
+    x0 = jnp.asarray([1.0, 1.0])
+    x, _, _, r, J = f(x0, jnp.ones(2), 0)
+    np.testing.assert_array_equal(x, x0)
+    np.testing.assert_allclose(r[:, 0], _exp_fit(x0))
+    np.testing.assert_allclose(J[:, 0], jax.jacfwd(_exp_fit)(x0))
+    f(x0, jnp.asarray([1.0, 0.0]), 30)
+    f(x0, jnp.asarray([0.0, 1.0]), 10)
+    assert f._cache_size() == 1
