@@ -332,3 +332,11 @@ def test_cli_out_folder_is_checked_before_computing(tmp_path, capsys):
     (tmp_path / "done" / "manifest.json").write_text(json.dumps(manifest))
     assert main(["explore", "--space", other, "--out", str(tmp_path / "done")]) == 2
     assert "holds another exploration (space key 'pitch_radius_mm' differs)" in capsys.readouterr().err
+
+
+def test_readme_documents_every_space_key_and_default():
+    from tension_zones.design._space import DEFAULTS
+
+    readme = (Path(tz.__file__).parent / "design" / "README.md").read_text()
+    for key, value in DEFAULTS.items():
+        assert f"| `{key}` | `{json.dumps(value)}` |" in readme, key
