@@ -221,7 +221,7 @@ DISTRIBUTED = textwrap.dedent("""
     _sweep._designs_chunk_jit = lambda *a: calls.append(1) or chunk(*a)
     table = tz.explore(tz.parse_space(json.loads(sys.argv[4])), sys.argv[3], quiet=True)
     print("process", jax.process_index(), "of", jax.process_count(), "table", table is not None,
-          "chunks", len(calls))
+          "chunks", len(calls), "devices", len(jax.local_devices()))
 """)
 
 
@@ -232,8 +232,9 @@ def free_port():
 
 
 def test_two_jax_distributed_processes_give_the_same_table(tmp_path):
-    """Acceptance: two processes on localhost (CPU) give the one-process table, bit for bit."""
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
+    """Acceptance: two processes on localhost (CPU) give the one-process table, bit for bit. Each has
+    two local devices, over which each chunk's designs are split (here: one device)."""
+    env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS="--xla_force_host_platform_device_count=2",
                PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1])] + sys.path))
     port, out = str(free_port()), tmp_path / "two"
     procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, port, str(i), str(out), json.dumps(SPACE)],
@@ -244,8 +245,8 @@ def test_two_jax_distributed_processes_give_the_same_table(tmp_path):
     for p, (o, e) in zip(procs, outs):
         assert p.returncode == 0, e[-3000:]
     # 5 chunks: process 0 takes 0, 2, 4 and process 1 takes 1, 3; process 0 writes the table
-    assert "process 0 of 2 table True chunks 3" in outs[0][0]
-    assert "process 1 of 2 table False chunks 2" in outs[1][0]
+    assert "process 0 of 2 table True chunks 3 devices 2" in outs[0][0]
+    assert "process 1 of 2 table False chunks 2 devices 2" in outs[1][0]
     assert_tables_identical(dict(np.load(out / "table.npz")), one)
 
 

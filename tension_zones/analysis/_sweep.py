@@ -320,16 +320,27 @@ def _design_stats(fn, stats, chunk, design, th_grid, de_grid, n_de, n_poses, arg
     return jnp.stack([_reduce_final(op, a) for (_, _, op), a in zip(stats, acc)])
 
 
-def _designs_chunk(fn, stats, chunk, designs, th_grid, de_grid, n_de, n_poses, args):
+def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, args):
     """:func:`_design_stats` for each design of a batch (leading axis), (D, S).
 
-    Mapped over the designs (a loop inside the program), not vmapped: inside the map each design is
-    unbatched, so the fusion barrier of :func:`~tension_zones._numerics.keep` (anchored on the
-    design's length) stays a barrier; vmapped over designs it becomes a select and the kinematic
+    ``layout = (chunk, mesh)`` (static): poses per step, and the local devices, over which the
+    designs are split (``shard_map``: one program for all of them, each device mapping over its
+    share). Mapped over the designs (a loop inside the program), not vmapped: inside the map each
+    design is unbatched, so the fusion barrier of :func:`~tension_zones._numerics.keep` (anchored on
+    the design's length) stays a barrier; vmapped over designs it becomes a select and the kinematic
     measures ran 6x slower (155 vs 909 designs/s, 4 wires, the paper's grid). Poses are vmapped.
     """
-    return jax.lax.map(
-        lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
+    chunk, mesh = layout
+
+    def local(designs, th_grid, de_grid, n_de, n_poses, args):
+        return jax.lax.map(
+            lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
+
+    split, whole = PartitionSpec("designs"), PartitionSpec()
+    # no collectives inside: each device's designs are independent (check_vma off, as its loop
+    # carries start unsharded)
+    return jax.shard_map(local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole),
+                         out_specs=split, check_vma=False)(designs, th_grid, de_grid, n_de, n_poses, args)
 
 
 _designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
@@ -417,8 +428,9 @@ def sweep_designs(
       come: the working set depends on neither N nor the grid; the host keeps N x S results.
     * **no recompiles when only values change**: the designs' numbers, the grid's values *and size*
       and ``args`` are traced; one program per function, statistics, wire count and chunk sizes.
-    * **cores and devices**: up to :data:`IN_FLIGHT` chunks run at once, on the process's local
-      devices in turn.
+    * **cores and devices**: up to :data:`IN_FLIGHT` chunks run at once; each chunk's designs are
+      split over the process's local devices by one program (a chunk is padded to a multiple of
+      their number; results do not depend on it).
     * **processes and hosts**: after ``jax.distributed.initialize(...)`` the same call on every
       process splits the chunks between the processes (process ``p`` takes every P-th chunk still
       to do); each round's results are gathered with ``multihost_utils.process_allgather``.
@@ -467,22 +479,21 @@ def sweep_designs(
     dt = designs.dtype
     idx_t = np.int64 if th.size * de.size + P >= 2**31 else np.int32
     axes = _pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt)
-    devices = jax.local_devices()
-    shared = [jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), dev)
-              for dev in devices]
+    mesh = Mesh(np.array(jax.local_devices()), ("designs",))
+    padded = mesh.size * -(-D // mesh.size)  # a chunk's D designs, padded to split evenly
+    split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
+    shared = jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), whole)
 
     def launch(k):  # this process's k-th chunk, dispatched asynchronously
         if k >= mine.size:
             return -1, None
         c = int(mine[k])
-        rows = np.minimum(np.arange(c * D, c * D + D), n_designs - 1)  # pad with the last design
-        batch = jax.tree_util.tree_map(lambda x: x[rows], designs)
-        th_g, de_g, n_de, n_all, a = shared[k % len(devices)]
-        batch = jax.device_put(batch, devices[k % len(devices)])
-        return c, _designs_chunk_jit(fn, stats, P, batch, th_g, de_g, n_de, n_all, a)
+        rows = np.minimum(np.arange(c * D, c * D + padded), n_designs - 1)  # pad: the last design
+        batch = jax.device_put(jax.tree_util.tree_map(lambda x: x[rows], designs), split)
+        return c, _designs_chunk_jit(fn, stats, (P, mesh), batch, *shared)
 
     def collect(chunk, res, bar):  # this round's chunks of every process, into the results
-        arr = np.full((D, S), np.nan) if res is None else np.asarray(res)
+        arr = np.full((D, S), np.nan) if res is None else np.asarray(res)[:D]
         ids, arrs = _gather(chunk, arr) if nproc > 1 else ([chunk], arr[None])
         for c, rows in zip(ids, arrs):
             if c < 0 or not first:
