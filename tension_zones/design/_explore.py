@@ -117,8 +117,9 @@ def explore_designs(
 # The output folder: manifest, chunk files, table
 # --------------------------------------------------------------------------------------------
 def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through a temporary file and rename it: a file is either complete or absent."""
-    tmp = path.with_name(path.name + ".tmp")
+    """Write through a temporary file (same suffix: NumPy keeps the name) and rename it: a file is
+    either complete or absent."""
+    tmp = path.with_name(".tmp-" + path.name)
     write(tmp)
     os.replace(tmp, path)
 
@@ -177,19 +178,23 @@ class _Store:
         _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))
 
     def done(self, n: int) -> dict[int, np.ndarray]:
-        """The chunks of ``n`` wires the manifest lists as done, read back."""
-        return {c: np.load(self._chunk_path(n, c)) for c in self.manifest["done"][str(n)]}
+        """The chunks of ``n`` wires the manifest lists as done, read back (a listed chunk whose file
+        has gone is computed again)."""
+        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][str(n)]}
+        return {c: np.load(p) for c, p in paths.items() if p.exists()}
 
     def save(self, n: int, c: int, rows: np.ndarray) -> None:
         """One chunk's rows: the file first, then the manifest (a crash between leaves a file that
         the manifest does not list, computed again on resuming: nothing is lost or counted twice)."""
-        _write_atomic(self._chunk_path(n, c), lambda p: np.save(p.open("wb"), rows))
-        self.manifest["done"][str(n)].append(c)
+        _write_atomic(self._chunk_path(n, c), lambda p: np.save(p, rows))
+        done = self.manifest["done"][str(n)]
+        if c not in done:
+            done.append(c)
         self._save_manifest()
 
     def finish(self, table: dict[str, np.ndarray]) -> list[Path]:
         paths = [self.out / "table.npz", self.out / "table.csv"]
-        _write_atomic(paths[0], lambda p: np.savez(p.open("wb"), **table))
+        _write_atomic(paths[0], lambda p: np.savez(p, **table))
         _write_atomic(paths[1], lambda p: write_csv(table, p))
         self.manifest["complete"] = True
         self._save_manifest()
