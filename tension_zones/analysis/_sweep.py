@@ -337,8 +337,8 @@ def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, 
             lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
 
     split, whole = PartitionSpec("designs"), PartitionSpec()
-    # no collectives inside: each device's designs are independent (check_vma off, as its loop
-    # carries start unsharded)
+    # each device's designs are independent (no collectives), so the varying-axis check is off: the
+    # loops' carries start replicated and become per-device
     return jax.shard_map(local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole),
                          out_specs=split, check_vma=False)(designs, th_grid, de_grid, n_de, n_poses, args)
 
