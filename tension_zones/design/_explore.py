@@ -290,7 +290,7 @@ def _objectives(columns: Sequence[str], known) -> list[tuple[str, float]]:
 def table_columns(space: Space) -> list[str]:
     """The columns of :func:`explore`'s table for ``space``, in order."""
     stats = [c for c, _, _ in _stats(space.load is not None)]
-    return ["design", *space.columns(space.n_wires[0]), *stats]
+    return ["design", *space.column_names(), *stats]
 
 
 def check_front(space: Space, columns: Sequence[str]) -> None:
@@ -302,22 +302,42 @@ def pareto_front(table: dict[str, np.ndarray], columns: Sequence[str]) -> np.nda
     """Which designs are on the Pareto front of two or three columns, (N,) bool.
 
     A design is on the front when no other design is at least as good in every column and better in
-    one. Each column is minimised or maximised as :func:`sense` says, unless written
-    ``"min:name"`` / ``"max:name"``. Designs with a NaN in these columns are not on it.
+    one (designs with equal values share their fate). Each column is minimised or maximised as
+    :func:`sense` says, unless written ``"min:name"`` / ``"max:name"``. Designs with a NaN in these
+    columns are not on it.
     """
     obj = _objectives(columns, list(table))
-    X = np.stack([s * np.asarray(table[c], float) for c, s in obj], axis=1)
-    ok = np.all(np.isfinite(X), axis=1)
+    X = np.stack([s * np.asarray(table[c], float) for c, s in obj], axis=1)  # all minimised
+    ok = np.flatnonzero(np.all(np.isfinite(X), axis=1))
+    order = ok[np.lexsort(X[ok].T[::-1])]
+    Xs = X[order]
+    new = np.ones(len(order), bool)  # the first of each run of equal points
+    new[1:] = np.any(Xs[1:] != Xs[:-1], axis=1)
     on = np.zeros(len(X), bool)
-    # sorted lexicographically, a dominating design always comes first; comparing each design with
-    # the front so far is enough (whatever dominates it is, or is dominated by, a front member)
-    front = np.empty((0, X.shape[1]))
-    for i in np.flatnonzero(ok)[np.lexsort(X[ok].T[::-1])]:
-        x = X[i]
-        if not np.any(np.all(front <= x, axis=1) & np.any(front < x, axis=1)):
-            on[i] = True
-            front = np.vstack([front, x])
+    on[order] = _undominated(Xs[new])[np.cumsum(new) - 1]
     return on
+
+
+def _undominated(U):
+    """For distinct points sorted lexicographically (every column minimised): which no other point
+    dominates. Only an earlier point can dominate one, and, the points being distinct, an earlier
+    point at least as good in the other columns does. Two columns: one pass with the running minimum
+    of the second. Three: blocks of points against the front so far and against each other
+    (vectorised; whatever dominates a point is on the front or dominated by a front member)."""
+    if U.shape[1] == 2:
+        best = np.minimum.accumulate(np.concatenate([[np.inf], U[:-1, 1]]))
+        return U[:, 1] < best
+    keep = np.zeros(len(U), bool)
+    front = U[:0]
+    for start in range(0, len(U), 128):
+        B = U[start:start + 128]
+        beaten = np.zeros(len(B), bool)
+        for other in (front, B):  # [i, j]: other j dominates point i
+            le, lt = other[None] <= B[:, None], other[None] < B[:, None]
+            beaten |= np.any(np.all(le, axis=2) & np.any(lt, axis=2), axis=1)
+        keep[start:start + len(B)] = ~beaten
+        front = np.concatenate([front, B[~beaten]])
+    return keep
 
 
 def default_front(space: Space) -> list[str]:

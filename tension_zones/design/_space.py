@@ -130,6 +130,11 @@ class Space:
         index = np.unravel_index(np.arange(self.count(n)), [len(x) for x in levels])  # first slowest
         return {key: lv[i] for (key, _, _), lv, i in zip(dims, levels, index)}
 
+    def column_names(self) -> list[str]:
+        """The names of :meth:`columns`, in order."""
+        angles = [f"wire_angle_{k + 1}_deg" for k in range(max(self.n_wires))]
+        return ["n_wires", *FIELDS, *angles]
+
     def columns(self, n: int) -> dict[str, np.ndarray]:
         """The designs for ``n`` wires as table columns (design-file names; ``wire_angle_k_deg`` for
         k = 1..max n_wires, NaN past n), (N,) each."""
