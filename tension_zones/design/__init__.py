@@ -1,4 +1,4 @@
-"""Design: scenario files, the design optimiser and design-space exploration."""
+"""Design: scenario files and the design optimiser."""
 
 from ._optimise import evaluate_design, optimize, spread, write_outputs
 from ._scenario import DEFAULTS, Scenario, load_scenario, parse_scenario
