@@ -145,11 +145,13 @@ def plot_convergence(result: dict, path, infeasible_rank: float):
 
 # ---- design-space exploration (issue 16) --------------------------------------------------------
 def _label(column: str) -> str:
-    from .design._explore import UNITS, sense
+    """An exploration column (``name``, ``min:name`` or ``max:name``) with its unit and which way is better."""
+    from .design._explore import UNITS, objective
 
-    unit = next((u for k, u in UNITS.items() if column.startswith(k)), None)
+    name, best = objective(column)
+    unit = next((u for k, u in UNITS.items() if name.startswith(k)), None)
     unit = {"mm": " (mm)", "rad": " (rad)", "deg": " (deg)"}.get(unit, "")
-    return f"{column}{unit}, {'higher' if sense(column) == 'max' else 'lower'} is better"
+    return f"{name}{unit}, {'higher' if best == 'max' else 'lower'} is better"
 
 
 def _by_wire_count(table):
@@ -162,7 +164,11 @@ def _by_wire_count(table):
 def plot_front(table: dict, columns, front, path=None):
     """Issue 16: every design of an exploration (colour: wire count) and its Pareto ``front`` (bool
     per design, black-edged), for two columns (one scatter, the front joined as a staircase) or three
-    (the three pairs side by side). Saves to ``path`` if given; returns the figure."""
+    (the three pairs side by side); ``min:``/``max:`` prefixes as in ``pareto_front``. Saves to
+    ``path`` if given; returns the figure."""
+    from .design._explore import objective
+
+    labels, columns = list(columns), [objective(c)[0] for c in columns]
     pairs = [(0, 1)] if len(columns) == 2 else [(0, 1), (0, 2), (1, 2)]
     fig, axes = plt.subplots(1, len(pairs), figsize=(5.6 * len(pairs), 4.6), squeeze=False)
     front = np.asarray(front, bool)
@@ -174,10 +180,13 @@ def plot_front(table: dict, columns, front, path=None):
             ax.scatter(x[rows & front], y[rows & front], s=34, color=colour, edgecolor="k", lw=0.8,
                        zorder=3)
         if len(columns) == 2 and front.any():
+            # the edge of what the front dominates: a point's value holds until the next point when x
+            # is minimised (it dominates larger x), from the previous one when x is maximised
             order = np.argsort(x[front])
-            ax.step(x[front][order], y[front][order], where="post", color="k", lw=0.8, zorder=2)
-        ax.set_xlabel(_label(columns[i]), fontsize=9)
-        ax.set_ylabel(_label(columns[j]), fontsize=9)
+            where = "post" if objective(labels[0])[1] == "min" else "pre"
+            ax.step(x[front][order], y[front][order], where=where, color="k", lw=0.8, zorder=2)
+        ax.set_xlabel(_label(labels[i]), fontsize=9)
+        ax.set_ylabel(_label(labels[j]), fontsize=9)
         ax.grid(alpha=0.3)
     handles = axes[0][0].get_legend_handles_labels()[0]
     handles.append(plt.Line2D([], [], ls="", marker="o", mfc="w", mec="k", label="Pareto front"))
@@ -198,8 +207,9 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
     count, the others grey (at most ``max_lines`` of them, evenly picked). Returns the figure."""
     from matplotlib.collections import LineCollection
 
-    from .design._explore import STATS
+    from .design._explore import STATS, objective
 
+    columns = [objective(c)[0] for c in columns]
     def varies(v):
         v = np.asarray(v, float)
         return np.unique(v[np.isfinite(v)]).size > 1

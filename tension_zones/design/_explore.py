@@ -78,6 +78,14 @@ def sense(column: str) -> str:
     return "max" if column.startswith("kci") or column.endswith("_fraction") else "min"
 
 
+def objective(column: str) -> tuple[str, str]:
+    """``"name"``, ``"min:name"`` or ``"max:name"`` -> ``(name, "min" | "max")`` (bare: :func:`sense`)."""
+    prefix, _, name = column.rpartition(":")
+    if prefix not in ("", "min", "max"):
+        raise ValueError(f"front column {column!r}: the prefix must be 'min:' or 'max:'")
+    return name, prefix or sense(name)
+
+
 def explore_designs(
     designs: Design,
     theta_L,
@@ -272,18 +280,16 @@ def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[st
 # Pareto front
 # --------------------------------------------------------------------------------------------
 def _objectives(columns: Sequence[str], known) -> list[tuple[str, float]]:
-    """``(column, sign)`` with sign -1 for a column to maximise; ``"max:col"`` / ``"min:col"`` say
-    it explicitly, a bare name takes :func:`sense`. Two or three columns, each one of ``known``."""
+    """``(column, sign)`` with sign -1 for a column to maximise (:func:`objective`); two or three
+    columns, each one of ``known``."""
     if not 2 <= len(columns) <= 3:
         raise ValueError(f"a Pareto front takes two or three columns, got {len(columns)}: {list(columns)}")
     out = []
     for c in columns:
-        s, _, name = c.rpartition(":")
-        if s not in ("", "min", "max"):
-            raise ValueError(f"front column {c!r}: the prefix must be 'min:' or 'max:'")
+        name, best = objective(c)
         if name not in known:
             raise ValueError(f"front column {name!r} is not a column of the table; columns: {list(known)}")
-        out.append((name, -1.0 if (s or sense(name)) == "max" else 1.0))
+        out.append((name, -1.0 if best == "max" else 1.0))
     return out
 
 
@@ -356,11 +362,10 @@ def write_front(table: dict[str, np.ndarray], out, columns: Sequence[str]) -> li
 
     out = Path(out)
     on = pareto_front(table, columns)
-    names = [c for c, _ in _objectives(columns, list(table))]
     paths = [out / "front.csv", out / "front.png", out / "parallel.png"]
     write_csv({k: v[on] for k, v in table.items()}, paths[0])
-    plot_front(table, names, on, paths[1])
-    plot_parallel(table, names, on, paths[2])
+    plot_front(table, columns, on, paths[1])
+    plot_parallel(table, columns, on, paths[2])
     return paths
 
 
