@@ -261,6 +261,9 @@ def markdown(res) -> str:
         s = res["scaling"]["sharded_4_host_devices"]
         out.append(f"| {s['poses']:.2g} on {s['devices']} forced host devices | {s['seconds']:.3g} "
                    f"| {s['poses'] / s['seconds']:.3g} | {s['peak_rss_mb']:.0f} |")
+    if "explore" in res:
+        out += ["", "### Design-space exploration (4 wires, the paper's 18 x 145 grid)", "",
+                markdown_explore(res)]
     for key, title in (("calibration", "Calibration"), ("optimiser", "Optimiser")):
         if key in res:
             out += ["", f"### {title}", "", "| what | seconds | note |", "|---|---|---|"]
@@ -334,9 +337,136 @@ def bench_optimiser(quick):
     return rows
 
 
+# ------------------------------------------------------------------------------------------------
+# Design-space exploration (issue 16)
+# ------------------------------------------------------------------------------------------------
+def _explore_space(n_designs, loaded):
+    """4 wires; pitch radius, length, wire stiffness and each wire's angle offset varied; a Halton
+    sample of ``n_designs``; the paper's grid (theta_L 0..85 step 5, delta 0..360 step 2.5)."""
+    return tz.parse_space({"n_wires": 4, "pitch_radius_mm": [1.0, 3.0], "length_mm": [15.0, 30.0],
+                           "wire_stiffness_N_per_mm": [55.0, 105.0], "wire_angle_offset_deg": [-10, 10],
+                           "sample": {"method": "halton", "designs": n_designs},
+                           "load_N": [5.0, 0.0, 0.0] if loaded else None})
+
+
+_EXPLORE_CHILD = textwrap.dedent("""
+    import json, sys, time
+    sys.path.insert(0, sys.argv[3])
+    from run import _explore_space
+    import tension_zones as tz
+    space = _explore_space(int(sys.argv[1]), sys.argv[2] == "1")
+    t0 = time.perf_counter()
+    table = tz.explore(space, quiet=True)  # first call: compile included
+    t = time.perf_counter() - t0
+    hwm = [l for l in open("/proc/self/status") if l.startswith("VmHWM")][0].split()[1]
+    print(json.dumps({"designs": int(table["design"].size), "seconds_with_compile": t,
+                      "peak_rss_mb": int(hwm) / 1024,
+                      "table_mb": sum(v.nbytes for v in table.values()) / 2**20}))
+""")
+
+
+def _loop_over_designs(space, rows, chunk_size=None):
+    """Today's way: one ``sweep_grid`` per design, each design's arrays reduced with NumPy into the
+    same statistics (the kinematic measures, plus the statics with a load)."""
+    from tension_zones.analysis._sweep import DEFAULT_CHUNK, sweep_grid
+    from tension_zones.design._explore import _kinematic_pose, _loaded_pose, _stats
+    from tension_zones.model._statics import as_wrench
+
+    loaded = space.load is not None
+    fn, args = (_loaded_pose, (space.dq, as_wrench(space.load))) if loaded else (_kinematic_pose, (space.dq,))
+    reduce = {"max": np.max, "min": np.min, "mean": np.mean, "nanmax": np.nanmax, "nanmean": np.nanmean}
+    cols = space.columns(4)
+    out = []
+    for i in rows:
+        d = tz.Design(4, cols["length_mm"][i], cols["pitch_radius_mm"][i],
+                      wire_angles=np.radians([cols[f"wire_angle_{k}_deg"][i] for k in range(1, 5)]),
+                      wire_stiffness=cols["wire_stiffness_N_per_mm"][i])
+        res = sweep_grid(fn, d, space.theta_L, space.delta, *args, quiet=True,
+                         chunk_size=chunk_size or DEFAULT_CHUNK)
+        out.append([reduce[op](res[key].astype(float)) for _, key, op in _stats(loaded)])
+    return np.array(out)
+
+
+def bench_explore(quick):
+    """10^4 designs x the paper's grid: the exploration engine against a Python loop over designs
+    calling ``sweep_grid`` (timed on 40 designs and extrapolated; once with its default chunk, once
+    with the chunk set to the grid's size); compile time (the first call, on one design); peak
+    memory of fresh processes exploring 10^3, 10^4 and 10^5 designs."""
+    n_designs = 10**3 if quick else 10**4
+    n_loop = 40
+    rows = {}
+    for loaded in (False, True):
+        space = _explore_space(n_designs, loaded)
+        n_poses = space.theta_L.size * space.delta.size
+        subset = np.linspace(0, n_designs - 1, n_loop).astype(int)
+        # compile: the first call on one design (the same program: a chunk is padded to 128 designs)
+        compile_s = _seconds(lambda: tz.explore(_explore_space(1, loaded), quiet=True))  # noqa: B023
+        table = tz.explore(space, quiet=True)
+        # the loop's statistics are the engine's (a check, not a timing)
+        ref = _loop_over_designs(space, subset[:4])
+        from tension_zones.design._explore import _stats
+
+        ours = np.array([[table[c][i] for c, _, _ in _stats(loaded)] for i in subset[:4]])
+        agree = float(np.nanmax(np.abs(ours - ref) / np.maximum(np.abs(ref), 1e-300)))
+        _loop_over_designs(space, subset[:2], chunk_size=n_poses)  # warm-up of the matched chunk
+        t_e, t_l, t_m = [], [], []
+        for _ in range(2 if quick else 3):  # interleaved, as the other sections
+            t_e.append(_seconds(lambda: tz.explore(space, quiet=True)))  # noqa: B023
+            t_l.append(_seconds(lambda: _loop_over_designs(space, subset)))  # noqa: B023
+            t_m.append(_seconds(lambda: _loop_over_designs(space, subset, chunk_size=n_poses)))  # noqa: B023
+        t_explore = statistics.median(t_e)
+        rows["loaded" if loaded else "kinematic"] = {
+            "designs": n_designs, "poses_per_design": n_poses,
+            "explore_s": t_explore, "explore_compile_s": compile_s,
+            "explore_designs_per_s": n_designs / t_explore,
+            "explore_pose_evals_per_s": n_designs * n_poses / t_explore,
+            "loop_designs_timed": n_loop,
+            "loop_designs_per_s": n_loop / statistics.median(t_l),
+            "loop_chunk_matched_designs_per_s": n_loop / statistics.median(t_m),
+            "speedup_vs_loop": statistics.median(
+                (a / n_loop) / (b / n_designs) for a, b in zip(t_l, t_e)),
+            "speedup_vs_loop_chunk_matched": statistics.median(
+                (a / n_loop) / (b / n_designs) for a, b in zip(t_m, t_e)),
+            "max_rel_difference_vs_loop": agree,
+        }
+    env = dict(os.environ)
+    memory = []
+    for n in (10**3, 10**4) if quick else (10**3, 10**4, 10**5):
+        r = subprocess.run([sys.executable, "-c", _EXPLORE_CHILD, str(n), "0", str(HERE)], env=env,
+                           capture_output=True, text=True, timeout=3600, check=False)
+        if r.returncode != 0:
+            raise RuntimeError(r.stderr[-2000:])
+        memory.append(json.loads(r.stdout.strip().splitlines()[-1]))
+    return {**rows, "memory": memory}
+
+
+def markdown_explore(res) -> str:
+    """The explore section's table (``benchmarks/README.md`` takes it by hand: its numbers come
+    from their own run)."""
+    e = res["explore"]
+    out = [("| statistics | designs x poses | explore: designs/s | explore: pose-evals/s | loop of "
+            "`sweep_grid`: designs/s | loop, chunk = grid: designs/s | x loop | x loop (chunk = grid) | "
+            "compile (s) | max rel. difference |"), "|---|---|---|---|---|---|---|---|---|---|"]
+    for kind in ("kinematic", "loaded"):
+        r = e[kind]
+        loop_pe = r["loop_designs_per_s"] * r["poses_per_design"]
+        out.append(f"| {kind} | {r['designs']:.0e} x {r['poses_per_design']} | "
+                   f"{r['explore_designs_per_s']:.3g} | {r['explore_pose_evals_per_s']:.3g} | "
+                   f"{r['loop_designs_per_s']:.3g} ({loop_pe:.3g} pose-evals/s) | "
+                   f"{r['loop_chunk_matched_designs_per_s']:.3g} | {r['speedup_vs_loop']:.1f} | "
+                   f"{r['speedup_vs_loop_chunk_matched']:.1f} | {r['explore_compile_s']:.1f} | "
+                   f"{r['max_rel_difference_vs_loop']:.1e} |")
+    out += ["", ("| designs (kinematic, fresh process) | time incl. compile (s) | peak memory (MB) | "
+                 "table (MB) |"), "|---|---|---|---|"]
+    for m in e["memory"]:
+        out.append(f"| {m['designs']:.0e} | {m['seconds_with_compile']:.3g} | {m['peak_rss_mb']:.0f} | "
+                   f"{m['table_mb']:.2f} |")
+    return "\n".join(out)
+
+
 SECTIONS = {"kinematics": bench_kinematics, "compliance": bench_compliance,
             "scaling": bench_scaling, "calibration": bench_calibration,
-            "optimiser": bench_optimiser}
+            "optimiser": bench_optimiser, "explore": bench_explore}
 
 
 def main(argv=None):

@@ -25,6 +25,8 @@ from .design import evaluate_design, optimize, spread
 from .design import Scenario, load_scenario, parse_scenario
 from .analysis import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
 from .analysis import grid_deg, sweep_grid, sweep_poses
+from .analysis import sweep_designs  # issue 16
+from .design import Space, explore, explore_designs, load_space, parse_space, pareto_front  # issue 16
 from .model import (
     PAPER_DELTA_DEG,
     PAPER_THETA_L_DEG,
@@ -133,4 +135,12 @@ __all__ = [
     "wire_lengths",
     "wire_lengths_b",
     "zonogon_vertices",
+    # issue 16: design-space exploration
+    "Space",
+    "explore",
+    "explore_designs",
+    "load_space",
+    "parse_space",
+    "pareto_front",
+    "sweep_designs",
 ]

@@ -338,6 +338,71 @@ def _add_calibrate_parser(sub) -> None:
 
 
 
+# ---- explore (issue 16): design-space exploration ----------------------------------------------
+def _init_distributed(args) -> None:
+    """Join a ``jax.distributed`` run (before anything touches a JAX device)."""
+    given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes,
+             "--process-id": args.process_id}
+    if not args.distributed and all(v is None for v in given.values()):
+        return
+    import jax
+
+    missing = [k for k, v in given.items() if v is None]
+    if len(missing) < 3:  # explicit coordinates: all three
+        if missing:
+            raise CLIError(f"{', '.join(given)} go together: {missing[0]} is missing")
+        kw = {"coordinator_address": args.coordinator, "num_processes": args.num_processes,
+              "process_id": args.process_id}
+    else:  # --distributed: the cluster's environment says (SLURM, Open MPI, ...)
+        kw = {}
+    try:
+        jax.distributed.initialize(**kw)
+    except (RuntimeError, ValueError) as e:
+        raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+
+
+def cmd_explore(args) -> None:
+    import time
+
+    from .design._explore import check_front, default_front, explore, summary, write_front
+    from .design._space import load_space
+
+    _init_distributed(args)
+    space = load_space(args.space)
+    front = default_front(space) if args.front is None else [c.strip() for c in args.front.split(",")]
+    check_front(space, front)
+    t0 = time.perf_counter()
+    table = explore(space, args.out, quiet=args.quiet, log=print)
+    if table is None:  # another process of a distributed run: process 0 writes
+        return
+    paths = write_front(table, args.out, front)
+    print(summary(table, time.perf_counter() - t0, front))
+    if not args.quiet:
+        print(f"wrote {Path(args.out) / 'table.npz'}, table.csv, manifest.json and "
+              f"{', '.join(p.name for p in paths)}")
+
+
+def _add_explore_parser(sub) -> None:
+    e = sub.add_parser("explore", help="explore a design space: per-design workspace statistics, "
+                                       "Pareto front, plots (resumable)")
+    e.add_argument("--space", required=True, help="design-space JSON (keys: tension_zones/design/README.md)")
+    e.add_argument("--out", required=True,
+                   help="output folder: new or empty, or holding this same exploration (resumed)")
+    e.add_argument("--front", help="two or three table columns for the Pareto front, comma-separated, "
+                                   "each optionally min:/max: (default: pitch_radius_mm, "
+                                   "dp_max_reduced_worst, and deflection_mm_reduced_worst with a load, "
+                                   "else controllable_fraction)")
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
+    d = e.add_argument_group("several processes and hosts (jax.distributed)")
+    d.add_argument("--distributed", action="store_true",
+                   help="join a jax.distributed run whose coordinates the cluster gives (e.g. under srun)")
+    d.add_argument("--coordinator", help="HOST:PORT of process 0 (with --num-processes, --process-id)")
+    d.add_argument("--num-processes", type=int, help="number of processes")
+    d.add_argument("--process-id", type=int, help="this process's index, 0 .. N-1")
+    e.set_defaults(func=cmd_explore)
+# ---- end explore -------------------------------------------------------------------------------
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tension-zones",
@@ -365,6 +430,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_sweep_parser(sub)  # issue 3
     _add_calibrate_parser(sub)
     _add_examples_parser(sub)
+    _add_explore_parser(sub)
     return p
 
 

@@ -141,3 +141,111 @@ def plot_convergence(result: dict, path, infeasible_rank: float):
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
+
+
+# ---- design-space exploration (issue 16) --------------------------------------------------------
+def _label(column: str) -> str:
+    """An exploration column (``name``, ``min:name`` or ``max:name``) with its unit and which way is better."""
+    from .design._explore import UNITS, objective
+
+    name, best = objective(column)
+    unit = next((u for k, u in UNITS.items() if name.startswith(k)), None)
+    unit = {"mm": " (mm)", "rad": " (rad)", "deg": " (deg)"}.get(unit, "")
+    return f"{name}{unit}, {'higher' if best == 'max' else 'lower'} is better"
+
+
+def _by_wire_count(table):
+    """``[(n, rows, colour)]`` for each wire count of an exploration table."""
+    counts = sorted(set(np.asarray(table["n_wires"]).tolist()))
+    return [(n, np.asarray(table["n_wires"]) == n, plt.get_cmap("tab10")(i % 10))
+            for i, n in enumerate(counts)]
+
+
+def plot_front(table: dict, columns, front, path=None):
+    """Issue 16: every design of an exploration (colour: wire count) and its Pareto ``front`` (bool
+    per design, black-edged), for two columns (one scatter, the front joined as a staircase) or three
+    (the three pairs side by side); ``min:``/``max:`` prefixes as in ``pareto_front``. Saves to
+    ``path`` if given; returns the figure."""
+    from .design._explore import objective
+
+    labels, columns = list(columns), [objective(c)[0] for c in columns]
+    pairs = [(0, 1)] if len(columns) == 2 else [(0, 1), (0, 2), (1, 2)]
+    fig, axes = plt.subplots(1, len(pairs), figsize=(5.6 * len(pairs), 4.6), squeeze=False)
+    front = np.asarray(front, bool)
+    for ax, (i, j) in zip(axes[0], pairs):
+        x, y = (np.asarray(table[columns[k]], float) for k in (i, j))
+        for n, rows, colour in _by_wire_count(table):
+            ax.scatter(x[rows & ~front], y[rows & ~front], s=6, color=colour, alpha=0.35, lw=0,
+                       label=f"{n} wires")
+            ax.scatter(x[rows & front], y[rows & front], s=34, color=colour, edgecolor="k", lw=0.8,
+                       zorder=3)
+        if len(columns) == 2 and front.any():
+            # the edge of what the front dominates: a point's value holds until the next point when x
+            # is minimised (it dominates larger x), from the previous one when x is maximised
+            order = np.argsort(x[front])
+            where = "post" if objective(labels[0])[1] == "min" else "pre"
+            ax.step(x[front][order], y[front][order], where=where, color="k", lw=0.8, zorder=2)
+        ax.set_xlabel(_label(labels[i]), fontsize=9)
+        ax.set_ylabel(_label(labels[j]), fontsize=9)
+        ax.grid(alpha=0.3)
+    handles = axes[0][0].get_legend_handles_labels()[0]
+    handles.append(plt.Line2D([], [], ls="", marker="o", mfc="w", mec="k", label="Pareto front"))
+    axes[0][0].legend(handles=handles, fontsize=8, markerscale=1.5)
+    fig.suptitle(f"{len(front)} designs, {int(front.sum())} on the Pareto front of\n"
+                 f"{', '.join(columns)}" + (" (projected)" if len(columns) == 3 else ""), fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig
+
+
+def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines: int = 1500):
+    """Issue 16: parallel coordinates of an exploration: ``fields`` (default: every design field that
+    varies, but the wire angles, whose meaning changes with the wire count) and the front's
+    ``columns``, each axis scaled to its range (ends labelled). Front designs are coloured by wire
+    count, the others grey (at most ``max_lines`` of them, evenly picked). Returns the figure."""
+    from matplotlib.collections import LineCollection
+
+    from .design._explore import STATS, objective
+
+    columns = [objective(c)[0] for c in columns]
+    def varies(v):
+        v = np.asarray(v, float)
+        return np.unique(v[np.isfinite(v)]).size > 1
+
+    if fields is None:
+        fields = [k for k in table if k != "design" and k not in STATS and k not in columns
+                  and not k.startswith("wire_angle_") and varies(table[k])]
+    axes_names = fields + list(columns)
+    V = np.stack([np.asarray(table[k], float) for k in axes_names], axis=1)
+    lo, hi = np.nanmin(V, axis=0), np.nanmax(V, axis=0)
+    U = (V - lo) / np.where(hi > lo, hi - lo, 1.0)
+    front = np.asarray(front, bool)
+    xs = np.arange(len(axes_names))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.7 * len(axes_names)), 4.8))
+    rest = np.flatnonzero(~front)
+    rest = rest[np.linspace(0, rest.size - 1, min(rest.size, max_lines)).astype(int)] if rest.size else rest
+    ax.add_collection(LineCollection([np.column_stack([xs, U[i]]) for i in rest], colors="0.7",
+                                     lw=0.4, alpha=0.4))
+    for n, rows, colour in _by_wire_count(table):
+        sel = np.flatnonzero(rows & front)
+        ax.add_collection(LineCollection([np.column_stack([xs, U[i]]) for i in sel], colors=[colour],
+                                         lw=1.2, label=f"front, {n} wires ({sel.size})"))
+    for k, name in enumerate(axes_names):
+        ax.axvline(k, color="k", lw=0.6)
+        ax.text(k, -0.06, f"{lo[k]:.3g}", ha="center", va="top", fontsize=7)
+        ax.text(k, 1.04, f"{hi[k]:.3g}", ha="center", va="bottom", fontsize=7)
+    ax.set_xticks(xs)
+    ax.set_xticklabels(axes_names, rotation=25, ha="right", fontsize=8)
+    ax.set_xlim(-0.3, len(axes_names) - 0.7)
+    ax.set_ylim(-0.12, 1.12)
+    ax.set_yticks([])
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    ax.set_title(f"Parallel coordinates: {int(front.sum())} front designs (colour), "
+                 f"{rest.size} of the others (grey); axes scaled min..max", fontsize=10)
+    fig.tight_layout()
+    if path is not None:
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+    return fig

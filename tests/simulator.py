@@ -278,9 +278,32 @@ class _Robot:
             Rs.append(R)
         return ps, Rs, np.concatenate(pts), np.concatenate(wts)
 
-    def load(self, x):
-        ps, _, pts, wts = self.chain(x.reshape(self.S, 2))
-        return -self.f @ ps[-1] - self.g @ (wts @ pts)
+    def load(self, X):
+        """The load's potential for a batch of configurations ``X`` (K, 2S), vectorised over K (the
+        load's gradient is taken by central differences of it)."""
+        K = X.shape[0]
+        B = X.reshape(K, self.S, 2)
+        p, R, M = np.zeros((K, 3)), np.tile(np.eye(3), (K, 1, 1)), np.zeros((K, 3))
+        for j in range(self.S):
+            L = self.L[j]
+            u, v = B[:, j, 0], B[:, j, 1]
+            phi, sig = np.hypot(u, v), np.arctan2(v, u)
+            s = np.r_[0.5 * L * (_GL[0] + 1.0), L]  # the weight's quadrature points, then the end disk
+            ph = phi[:, None] * s[None, :] / L
+            small = ph < 1e-6
+            lat = np.where(small, s * ph / 2, s * (1 - np.cos(ph)) / np.where(small, 1.0, ph))  # rho (1 - cos)
+            ax = np.where(small, s * np.ones_like(ph), s * np.sin(ph) / np.where(small, 1.0, ph))
+            local = np.stack([lat * np.cos(sig)[:, None], lat * np.sin(sig)[:, None], ax], axis=-1)  # (K, 9, 3)
+            world = p[:, None, :] + np.einsum("kij,kqj->kqi", R, local)
+            M += np.einsum("q,kqi->ki", 0.5 * L * _GL[1], world[:, :-1])
+            th = phi
+            kx, ky = np.where(th > 1e-12, -v / np.where(th > 1e-12, th, 1.0), 0.0), np.where(
+                th > 1e-12, u / np.where(th > 1e-12, th, 1.0), 0.0)
+            Kx = np.zeros((K, 3, 3))
+            Kx[:, 0, 2], Kx[:, 1, 2], Kx[:, 2, 0], Kx[:, 2, 1] = ky, -kx, -ky, kx
+            Rj = np.eye(3) + np.sin(th)[:, None, None] * Kx + (1 - np.cos(th))[:, None, None] * (Kx @ Kx)
+            p, R = world[:, -1], R @ Rj
+        return -(p @ self.f) - (M @ self.g)
 
     def energy(self, x, q, t):
         s = self.A @ x - q + self.pre / self.k
@@ -288,9 +311,10 @@ class _Robot:
         V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2)
         g = E * x + self.A.T @ (t * self.k * np.maximum(s, 0.0))
         if self.loaded:
-            V += self.load(x)
-            h = 1e-6
-            g = g + np.array([(self.load(x + h * e) - self.load(x - h * e)) / (2 * h) for e in np.eye(len(x))])
+            h, n = 1e-6, len(x)
+            vals = self.load(np.concatenate([x[None], x + h * np.eye(n), x - h * np.eye(n)]))
+            V += vals[0]
+            g = g + (vals[1:n + 1] - vals[n + 1:]) / (2 * h)
         return V, g
 
     def equilibrium(self, q, direction, x0):

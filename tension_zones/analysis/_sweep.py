@@ -23,6 +23,7 @@ flat list of poses (:func:`sweep_poses`):
 from __future__ import annotations
 
 import collections
+import functools
 import math
 from collections.abc import Callable, Sequence
 
@@ -63,6 +64,23 @@ def _eval_chunk(fn, design, theta_L, delta, args):
 _eval_chunk_jit = jax.jit(_eval_chunk, static_argnums=0)
 
 
+def _grid_index(start, chunk, n_poses):
+    """Flat indices ``start, ..., start + chunk - 1`` into a grid's poses; past the last pose, the
+    last pose again (padding), and whether each index is a real pose."""
+    i = start + jnp.arange(chunk, dtype=start.dtype)
+    return jnp.minimum(i, n_poses - 1), i < n_poses
+
+
+def _grid_poses(i, th_grid, de_grid, n_de):
+    """The poses ``(theta_L, delta)`` at flat indices ``i`` of a row-major grid (``delta`` fastest)."""
+    return th_grid[i // n_de], de_grid[i % n_de]
+
+
+def _pad_axes(grid, size, dtype):
+    """The grid's two axis vectors, each zero-padded to ``size``: the program sees no grid shape."""
+    return tuple(np.concatenate([np.asarray(x, dtype), np.zeros(size - len(x), dtype)]) for x in grid)
+
+
 def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses, args):
     """:func:`_eval_chunk` on grid poses ``start, start + 1, ...`` (row-major, ``delta`` fastest),
     generated on the device: no pose arrays cross from the host per chunk (a copy that competes with
@@ -70,9 +88,8 @@ def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses,
     padding past the last pose repeats the last pose. The axis vectors come padded to the chunk
     size, so the program depends on no grid dimension."""
     chunk, sharding = layout
-    i = jnp.minimum(start + jnp.arange(chunk, dtype=start.dtype), n_poses - 1)
-    i = jax.lax.with_sharding_constraint(i, sharding)
-    return _eval_chunk(fn, design, th_grid[i // n_de], de_grid[i % n_de], args)
+    i = jax.lax.with_sharding_constraint(_grid_index(start, chunk, n_poses)[0], sharding)
+    return _eval_chunk(fn, design, *_grid_poses(i, th_grid, de_grid, n_de), args)
 
 
 _eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
@@ -80,8 +97,10 @@ _eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
 
 def compiled_chunk_count() -> int:
     """How many chunk programs have been compiled so far (one per function, wire count, chunk size
-    and kind: flat poses, or a grid whose poses are generated on the device)."""
-    return _eval_chunk_jit._cache_size() + _eval_grid_chunk_jit._cache_size()
+    and kind: flat poses, a grid whose poses are generated on the device, or per-design statistics
+    of :func:`sweep_designs`, also one per set of statistics)."""
+    return (_eval_chunk_jit._cache_size() + _eval_grid_chunk_jit._cache_size()
+            + _designs_chunk_jit._cache_size())
 
 
 def _mesh(devices):
@@ -111,8 +130,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     if grid is not None:
         # the grid's axes on the device once (padded to the chunk size: the program does not depend on
         # the grid's shape); each chunk is then only a start index
-        th_g, de_g = (np.asarray(x, dt) for x in grid)
-        th_g, de_g = (np.concatenate([x, np.zeros(chunk - x.size, dt)]) for x in (th_g, de_g))
+        th_g, de_g = _pad_axes(grid, chunk, dt)
         idx_t = np.int64 if n_poses + chunk >= 2**31 else np.int32
         grid_d = jax.device_put((th_g, de_g, idx_t(grid[1].size), idx_t(n_poses)), replicated)
 
@@ -168,11 +186,11 @@ def _store_oldest(pending, store, bar):
     bar.update(stop - start)
 
 
-def _progress(total, desc, disable):
+def _progress(total, desc, disable, unit="pose", initial=0):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc or "sweep", unit="pose", unit_scale=True, disable=disable,
-                leave=False, dynamic_ncols=True)
+    return tqdm(total=total, desc=desc or "sweep", unit=unit, unit_scale=True, disable=disable,
+                leave=False, dynamic_ncols=True, initial=initial)
 
 
 def sweep_poses(
@@ -239,3 +257,263 @@ def sweep_grid(
 
     flat = _run(fn, design, nt * nd, poses_of, args, chunk_size, devices, quiet, keep, desc, grid=(th, de))
     return {k: v.reshape((nt, nd) + v.shape[1:]) for k, v in flat.items()}
+
+
+# ------------------------------------------------------------------------------------------------
+# Many designs at once: per-design statistics over one grid (issue 16)
+# ------------------------------------------------------------------------------------------------
+#: Designs per compiled call of :func:`sweep_designs`: the unit of progress, of the work a process
+#: takes and of what a resumed exploration keeps (about 0.1-0.3 s of work on the paper's grid).
+DEFAULT_DESIGN_CHUNK = 128
+#: Poses per step of each design's loop in :func:`sweep_designs`. Not a power of two: at 128, 256,
+#: 512 and 1024 poses the kinematic measures took 1.4-1.7x the CPU time per pose they take at 896,
+#: 1000, 1320 or 1344 (4 wires, interleaved runs; strides that are multiples of 4 KB alias in the
+#: caches). 1320 holds the paper's 18 x 145 grid in two steps with 1% padding.
+DESIGN_POSE_CHUNK = 1320
+#: Reductions over a design's poses, with NumPy's meaning: ``max``, ``min``, ``mean`` (a NaN pose makes
+#: the result NaN), ``nanmax``, ``nanmean`` (over the non-NaN poses; NaN when there is none).
+REDUCTIONS = ("max", "min", "mean", "nanmax", "nanmean")
+_IDENTITY = {"max": -np.inf, "nanmax": -np.inf, "min": np.inf, "mean": 0.0, "nanmean": 0.0}
+
+
+def _reduce_step(op, acc, x, real):
+    """One step's poses into the running ``(value, count)`` of reduction ``op``; ``real`` marks the
+    poses that are not padding."""
+    value, count = acc
+    x = x.astype(value.dtype)
+    use = real & ~jnp.isnan(x) if op.startswith("nan") else real
+    x = jnp.where(use, x, _IDENTITY[op])
+    if op.endswith("max"):
+        value = jnp.maximum(value, jnp.max(x))
+    elif op == "min":
+        value = jnp.minimum(value, jnp.min(x))
+    else:
+        value = value + jnp.sum(x)
+    return value, count + jnp.sum(use, dtype=value.dtype)
+
+
+def _reduce_final(op, acc):
+    value, count = acc
+    some = count > 0
+    if op.endswith("mean"):
+        value = value / jnp.where(some, count, 1.0)
+    return jnp.where(some, value, jnp.nan)
+
+
+def _design_stats(fn, stats, chunk, design, th_grid, de_grid, n_de, n_poses, args):
+    """Statistics of ``fn`` over every pose of the grid for **one** design, (S,).
+
+    The poses are generated on the device ``chunk`` at a time (as :func:`_eval_grid_chunk` does) and
+    reduced as they come, so the working set is one step's poses whatever the grid; the number of
+    steps is a traced value, so a grid of another size is the same program. ``stats`` (static):
+    ``(name, output, reduction)`` triples.
+    """
+    dt = design.length.dtype
+
+    def step(c, acc):
+        i, real = _grid_index(c * chunk, chunk, n_poses)
+        out = _eval_chunk(fn, design, *_grid_poses(i, th_grid, de_grid, n_de), args)
+        return tuple(_reduce_step(op, a, out[key], real) for (_, key, op), a in zip(stats, acc))
+
+    init = tuple((jnp.asarray(_IDENTITY[op], dt), jnp.zeros((), dt)) for _, _, op in stats)
+    acc = jax.lax.fori_loop(0, (n_poses + chunk - 1) // chunk, step, init)
+    return jnp.stack([_reduce_final(op, a) for (_, _, op), a in zip(stats, acc)])
+
+
+def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, args):
+    """:func:`_design_stats` for each design of a batch (leading axis), (D, S).
+
+    ``layout = (chunk, mesh)`` (static): poses per step, and the local devices, over which the
+    designs are split (``shard_map``: one program for all of them, each device mapping over its
+    share). Mapped over the designs (a loop inside the program), not vmapped: inside the map each
+    design is unbatched, so the fusion barrier of :func:`~tension_zones._numerics.keep` (anchored on
+    the design's length) stays a barrier; vmapped over designs it becomes a select and the kinematic
+    measures ran 6x slower (155 vs 909 designs/s, 4 wires, the paper's grid). Poses are vmapped.
+    """
+    chunk, mesh = layout
+
+    def local(designs, th_grid, de_grid, n_de, n_poses, args):
+        return jax.lax.map(
+            lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
+
+    split, whole = PartitionSpec("designs"), PartitionSpec()
+    # each device's designs are independent (no collectives), so the varying-axis check is off: the
+    # loops' carries start replicated and become per-device
+    return jax.shard_map(local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole),
+                         out_specs=split, check_vma=False)(designs, th_grid, de_grid, n_de, n_poses, args)
+
+
+_designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
+
+
+@functools.lru_cache(maxsize=64)
+def _output_shapes(fn, n_wires, dtype, arg_specs):
+    """``{output: shape}`` of ``fn`` at one pose (traced once per function, wire count and argument
+    shapes: tracing the kinematic measures takes 0.4 s, more than exploring a few designs)."""
+    spec = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype),
+                                  Design(n_wires, 1.0, 1.0, dtype=dtype))
+    scalar = jax.ShapeDtypeStruct((), dtype)
+    args = tuple(jax.ShapeDtypeStruct(shape, dt) for shape, dt in arg_specs)
+    out = jax.eval_shape(lambda d, t, x, a: fn(d, t, x, *a), spec, scalar, scalar, args)
+    return {k: v.shape for k, v in out.items()}
+
+
+def _check_stats(fn, design, args, stats):
+    """``stats`` as a tuple of ``(name, output, reduction)``, checked against ``fn``'s outputs."""
+    stats = tuple(tuple(s) for s in stats)
+    if not stats or any(len(s) != 3 for s in stats):
+        raise ValueError("stats must be a non-empty list of (name, output, reduction) triples")
+    names = [s[0] for s in stats]
+    if len(set(names)) != len(names):
+        raise ValueError(f"stats names must be unique, got {names}")
+    arg_specs = tuple((np.shape(a), str(np.asarray(a).dtype)) for a in args)
+    shapes = _output_shapes(fn, design.n_wires, str(design.dtype), arg_specs)
+    for name, key, op in stats:
+        if op not in REDUCTIONS:
+            raise ValueError(f"stat {name!r}: unknown reduction {op!r}; known: {list(REDUCTIONS)}")
+        if key not in shapes:
+            raise ValueError(f"stat {name!r}: the function has no output {key!r}; it returns {sorted(shapes)}")
+        if shapes[key] != ():
+            raise ValueError(f"stat {name!r}: output {key!r} is not a scalar per pose "
+                             f"(shape {shapes[key]})")
+    return stats
+
+
+def _positive_int(name, v):
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+        raise ValueError(f"{name} must be a positive integer, got {v!r}")
+    return int(v)
+
+
+def _gather(chunk_id, arr):
+    """Every process's ``(chunk id, results)`` of this round, on every process (JAX collectives)."""
+    from jax.experimental import multihost_utils
+
+    ids, arrs = multihost_utils.process_allgather((np.array([chunk_id]), arr))
+    return [int(i) for i in np.asarray(ids).reshape(-1)], np.asarray(arrs)
+
+
+def _done_everywhere(is_done):
+    """Process 0's record of the chunks already done, the same on every process."""
+    if jax.process_count() == 1:
+        return is_done
+    from jax.experimental import multihost_utils
+
+    return np.asarray(multihost_utils.broadcast_one_to_all(is_done.astype(np.int32))).astype(bool)
+
+
+def sweep_designs(
+    fn: Callable,
+    designs: Design,
+    theta_L,
+    delta,
+    *args,
+    stats: Sequence[tuple[str, str, str]],
+    designs_per_chunk: int = DEFAULT_DESIGN_CHUNK,
+    poses_per_chunk: int = DESIGN_POSE_CHUNK,
+    quiet: bool = False,
+    desc: str | None = None,
+    done: dict[int, np.ndarray] | None = None,
+    on_chunk: Callable[[int, np.ndarray], None] | None = None,
+) -> dict[str, np.ndarray] | None:
+    """Per-design statistics of ``fn`` over the grid ``theta_L x delta`` for a batch of designs.
+
+    For each design ``d`` of ``designs`` (a :class:`Design` whose leaves have a leading axis of N
+    designs, one wire count) and each ``(name, output, reduction)`` of ``stats``:
+    ``reduction`` (see :data:`REDUCTIONS`) of ``fn(d, theta_L, delta, *args)[output]`` over the
+    grid's poses. Equal to reducing :func:`sweep_grid`'s arrays with NumPy, design by design.
+
+    * **bounded memory**: designs go ``designs_per_chunk`` to a compiled call (the last chunk padded
+      with its last design), and each design's poses ``poses_per_chunk`` at a time, reduced as they
+      come: the working set depends on neither N nor the grid; the host keeps N x S results.
+    * **no recompiles when only values change**: the designs' numbers, the grid's values *and size*
+      and ``args`` are traced; one program per function, statistics, wire count and chunk sizes.
+    * **cores and devices**: up to :data:`IN_FLIGHT` chunks run at once; each chunk's designs are
+      split over the process's local devices by one program (a chunk is padded to a multiple of
+      their number; results do not depend on it).
+    * **processes and hosts**: after ``jax.distributed.initialize(...)`` the same call on every
+      process splits the chunks between the processes (process ``p`` takes every P-th chunk still
+      to do); each round's results are gathered with ``multihost_utils.process_allgather``.
+      Results and ``on_chunk`` calls happen on process 0; the other processes return ``None``.
+      Every chunk runs the same program on the same designs, so the table is bit for bit the
+      one-process table.
+    * **resuming**: ``done`` maps chunk indices (chunk ``c`` = designs ``c D .. c D + D - 1``) to
+      their rows, known on process 0 (e.g. read back from files): those are not computed again.
+      ``on_chunk(c, rows)`` is called on process 0 as each chunk's rows arrive (e.g. to save them).
+
+    Args:
+        fn: pure single-pose function ``fn(design, theta_L, delta, *args) -> dict`` of scalars.
+        designs: the batch (leaves with a leading axis of N).
+        theta_L, delta: the grid's axes (rad), 1-D.
+        *args: extra arguments shared by every pose and design (traced).
+        stats: ``(name, output, reduction)`` triples.
+
+    Returns ``{name: (N,) array}`` on process 0, ``None`` on the other processes.
+    """
+    if not isinstance(designs, Design) or np.ndim(designs.length) != 1:
+        raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis "
+                        "(a batch of designs)")
+    D = _positive_int("designs_per_chunk", designs_per_chunk)
+    P = _positive_int("poses_per_chunk", poses_per_chunk)
+    th, de = (np.asarray(x, dtype=float) for x in (theta_L, delta))
+    if th.ndim != 1 or de.ndim != 1 or th.size == 0 or de.size == 0:
+        raise ValueError(f"theta_L and delta must be non-empty 1-D grids, got shapes {th.shape} and {de.shape}")
+    designs = jax.tree_util.tree_map(np.asarray, designs)
+    stats = _check_stats(fn, designs, args, stats)
+    n_designs, S = designs.length.shape[0], len(stats)
+    n_chunks = -(-n_designs // D)
+    first = jax.process_index() == 0
+    nproc = jax.process_count()
+
+    results = np.full((n_designs, S), np.nan) if first else None
+    is_done = np.zeros(n_chunks, bool)
+    for c, rows in (done or {}).items() if first else ():
+        a, b = c * D, min(c * D + D, n_designs)
+        if not 0 <= c < n_chunks or np.shape(rows) != (b - a, S):
+            raise ValueError(f"done chunk {c}: expected {b - a} x {S} results, got shape {np.shape(rows)}")
+        results[a:b], is_done[c] = rows, True
+    pending = np.flatnonzero(~_done_everywhere(is_done))
+    mine = pending[jax.process_index()::nproc]
+    n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
+
+    dt = designs.dtype
+    idx_t = np.int64 if th.size * de.size + P >= 2**31 else np.int32
+    axes = _pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt)
+    mesh = Mesh(np.array(jax.local_devices()), ("designs",))
+    padded = mesh.size * -(-D // mesh.size)  # a chunk's D designs, padded to split evenly
+    split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
+    shared = jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), whole)
+
+    def launch(k):  # this process's k-th chunk, dispatched asynchronously
+        if k >= mine.size:
+            return -1, None
+        c = int(mine[k])
+        rows = np.minimum(np.arange(c * D, c * D + padded), n_designs - 1)  # pad: the last design
+        batch = jax.device_put(jax.tree_util.tree_map(lambda x: x[rows], designs), split)
+        return c, _designs_chunk_jit(fn, stats, (P, mesh), batch, *shared)
+
+    def collect(chunk, res, bar):  # this round's chunks of every process, into the results
+        arr = np.full((D, S), np.nan) if res is None else np.asarray(res)[:D]
+        ids, arrs = _gather(chunk, arr) if nproc > 1 else ([chunk], arr[None])
+        for c, rows in zip(ids, arrs):
+            if c < 0 or not first:
+                continue
+            a, b = c * D, min(c * D + D, n_designs)
+            results[a:b] = rows[: b - a]
+            if on_chunk is not None:
+                on_chunk(c, results[a:b])
+            bar.update(b - a)
+
+    initial = n_designs - int(np.sum(np.minimum(pending * D + D, n_designs) - pending * D))
+    with _progress(n_designs, desc or "designs", quiet or not first or pending.size < 2,
+                   unit="design", initial=initial) as bar:
+        queue = collections.deque()
+        for k in range(n_rounds):
+            queue.append(launch(k))
+            if len(queue) >= IN_FLIGHT:
+                collect(*queue.popleft(), bar)
+        while queue:
+            collect(*queue.popleft(), bar)
+    if not first:
+        return None
+    return {name: results[:, j] for j, (name, _, _) in enumerate(stats)}

@@ -110,17 +110,18 @@ class Scenario:
         return lo, hi
 
 
-def _err(key: str, msg: str) -> ValueError:
-    return ValueError(f"scenario key {key!r}: {msg}")
+def _err(key: str, msg: str, kind: str = "scenario") -> ValueError:
+    """The one-line error naming a key; ``kind`` says which file (a scenario, an exploration space)."""
+    return ValueError(f"{kind} key {key!r}: {msg}")
 
 
-def _num(key, v, lo=None, hi=None, lo_open=False):
+def _num(key, v, lo=None, hi=None, lo_open=False, kind="scenario"):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-        raise _err(key, f"must be a finite number, got {v!r}")
+        raise _err(key, f"must be a finite number, got {v!r}", kind)
     if lo is not None and (v < lo or (lo_open and v == lo)):
-        raise _err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}")
+        raise _err(key, f"must be {'>' if lo_open else '>='} {lo}, got {v}", kind)
     if hi is not None and v > hi:
-        raise _err(key, f"must be <= {hi}, got {v}")
+        raise _err(key, f"must be <= {hi}, got {v}", kind)
     return float(v)
 
 
@@ -133,28 +134,37 @@ def _range(key, v, lo_open=True):
     return a, b
 
 
-def _grid(key, v, lo, hi):
+def _grid(key, v, lo, hi, kind="scenario"):
     if not isinstance(v, (list, tuple)) or len(v) != 3:
-        raise _err(key, f"must be [min, max, step], got {v!r}")
-    a, b, s = (_num(key, x) for x in v)
+        raise _err(key, f"must be [min, max, step], got {v!r}", kind)
+    a, b, s = (_num(key, x, kind=kind) for x in v)
     if s <= 0:
-        raise _err(key, f"step must be positive, got {s}")
+        raise _err(key, f"step must be positive, got {s}", kind)
     if a > b:
-        raise _err(key, f"min {a} is larger than max {b}")
+        raise _err(key, f"min {a} is larger than max {b}", kind)
     if a < lo or b > hi:
-        raise _err(key, f"must lie within [{lo}, {hi}] deg, got [{a}, {b}]")
+        raise _err(key, f"must lie within [{lo}, {hi}] deg, got [{a}, {b}]", kind)
     n = int(math.floor((b - a) / s + 1e-9)) + 1
     if n > 100_000:
-        raise _err(key, f"grid of {n} values is too fine")
+        raise _err(key, f"grid of {n} values is too fine", kind)
     return np.radians(a + s * np.arange(n))
 
 
-def _merge(key, given, default):
+def _wire_counts(key, v, kind="scenario") -> tuple[int, ...]:
+    """A wire count or a list of them (3 to 16), sorted, without repeats."""
+    counts = [v] if isinstance(v, int) and not isinstance(v, bool) else v
+    if (not isinstance(counts, (list, tuple)) or not counts
+            or any(isinstance(c, bool) or not isinstance(c, int) or c < 3 or c > 16 for c in counts)):
+        raise _err(key, f"must be a list of integers from 3 to 16, got {v!r}", kind)
+    return tuple(sorted(set(counts)))
+
+
+def _merge(key, given, default, kind="scenario"):
     if not isinstance(given, dict):
-        raise _err(key, f"must be an object, got {given!r}")
+        raise _err(key, f"must be an object, got {given!r}", kind)
     unknown = sorted(set(given) - set(default))
     if unknown:
-        raise _err(key, f"unknown sub-key(s) {unknown}; known: {sorted(default)}")
+        raise _err(key, f"unknown sub-key(s) {unknown}; known: {sorted(default)}", kind)
     return {**default, **given}
 
 
@@ -169,12 +179,7 @@ def parse_scenario(d: dict) -> Scenario:
     for k, v in d.items():
         s[k] = _merge(k, v, DEFAULTS[k]) if isinstance(DEFAULTS[k], dict) else v
 
-    counts = s["n_wires"]
-    if isinstance(counts, int) and not isinstance(counts, bool):
-        counts = [counts]
-    if (not isinstance(counts, (list, tuple)) or not counts
-            or any(isinstance(c, bool) or not isinstance(c, int) or c < 3 or c > 16 for c in counts)):
-        raise _err("n_wires", f"must be a list of integers from 3 to 16, got {s['n_wires']!r}")
+    counts = _wire_counts("n_wires", s["n_wires"])
     c = s["constraints"]
     od = c["outer_diameter_mm"]
     w = s["weights"]
@@ -201,7 +206,7 @@ def parse_scenario(d: dict) -> Scenario:
     scen = Scenario(
         length=_num("length_mm", s["length_mm"], 0.0, lo_open=True),
         backbone_EI=_num("backbone_EI_Nmm2", s["backbone_EI_Nmm2"], 0.0),
-        n_wires=tuple(sorted(set(counts))),
+        n_wires=counts,
         pitch_radius=_range("pitch_radius_mm", s["pitch_radius_mm"]),
         wire_stiffness=_range("wire_stiffness_N_per_mm", s["wire_stiffness_N_per_mm"]),
         free_wire_angles=s["free_wire_angles"],

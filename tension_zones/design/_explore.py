@@ -1,0 +1,379 @@
+"""Design-space exploration (issue 16): many designs x a workspace grid -> per-design statistics.
+
+For every design of a :class:`~tension_zones.design.Space` (one batch and one compiled program per
+wire count), the workspace statistics of :data:`STATS` over the space's grid, computed by
+:func:`~tension_zones.analysis.sweep_designs` (chunked over designs and poses, bounded memory,
+several processes with ``jax.distributed``). With an output folder the exploration is resumable:
+each chunk of designs is saved as it arrives and ``manifest.json`` lists the chunks done; run the
+same exploration into the same folder and only the missing chunks are computed. The table (one row
+per design: its fields and its statistics) goes to ``table.npz`` and ``table.csv``; the Pareto front
+of any two or three columns is :func:`pareto_front`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import jax
+import numpy as np
+
+from ..analysis._metrics import DEFAULT_DQ, pose_metrics
+from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
+from ..model._design import Design
+from ..model._statics import as_wrench, compliance_pose
+from ._space import Space
+
+FORMAT = "tension-zones exploration 1"
+
+
+# --------------------------------------------------------------------------------------------
+# The statistics
+# --------------------------------------------------------------------------------------------
+def _kinematic_pose(design: Design, theta_L, delta, dq):
+    """:func:`~tension_zones.pose_metrics` at one pose, and whether it is controllable: at least two
+    wires taut, so that the taut wires alone span both configuration directions (MODEL.md Sec. 2; with
+    one, the reduced Jacobian has rank 1)."""
+    m = pose_metrics(design, theta_L, delta, dq)
+    return {**m, "controllable": m["n_taut"] >= 2}
+
+
+def _loaded_pose(design: Design, theta_L, delta, dq, wrench):
+    """:func:`_kinematic_pose` and the tension-only statics under ``wrench`` (MODEL.md Sec. 4)."""
+    return {**_kinematic_pose(design, theta_L, delta, dq), **compliance_pose(design, theta_L, delta, wrench)}
+
+
+def _stats(loaded: bool) -> tuple[tuple[str, str, str], ...]:
+    """``(column, per-pose output, reduction)``: worst (the largest uncertainty or deflection, the
+    smallest KCI) and mean of each measure, full and reduced; the controllable fraction; with a load
+    the deflections over the poses the wires can hold (NaN elsewhere) and the fraction they can."""
+    out = []
+    for measure, worst in (("dp_max", "max"), ("dw_max", "max"), ("kci_v", "min"), ("kci_w", "min")):
+        for mode in ("full", "reduced"):
+            out += [(f"{measure}_{mode}_worst", f"{measure}_{mode}", worst),
+                    (f"{measure}_{mode}_mean", f"{measure}_{mode}", "mean")]
+    out.append(("controllable_fraction", "controllable", "mean"))
+    if loaded:
+        for measure in ("deflection_mm", "deflection_deg"):
+            for mode in ("full", "reduced"):
+                out += [(f"{measure}_{mode}_worst", f"{measure}_{mode}", "nanmax"),
+                        (f"{measure}_{mode}_mean", f"{measure}_{mode}", "nanmean")]
+        out.append(("statics_feasible_fraction", "feasible", "mean"))
+    return tuple(out)
+
+
+#: Every statistic's column name (those after ``controllable_fraction`` only with a load).
+STATS = tuple(s[0] for s in _stats(True))
+#: Units of the statistics (by prefix).
+UNITS = {"dp_max": "mm", "dw_max": "rad", "kci": "1", "deflection_mm": "mm", "deflection_deg": "deg",
+         "controllable": "1", "statics": "1"}
+
+
+def sense(column: str) -> str:
+    """Whether a column is better small (``"min"``: uncertainties, deflections, design fields) or
+    large (``"max"``: KCI, the fractions)."""
+    return "max" if column.startswith("kci") or column.endswith("_fraction") else "min"
+
+
+def objective(column: str) -> tuple[str, str]:
+    """``"name"``, ``"min:name"`` or ``"max:name"`` -> ``(name, "min" | "max")`` (bare: :func:`sense`)."""
+    prefix, _, name = column.rpartition(":")
+    if prefix not in ("", "min", "max"):
+        raise ValueError(f"front column {column!r}: the prefix must be 'min:' or 'max:'")
+    return name, prefix or sense(name)
+
+
+def explore_designs(
+    designs: Design,
+    theta_L,
+    delta,
+    dq=DEFAULT_DQ,
+    load=None,
+    *,
+    designs_per_chunk: int = DEFAULT_DESIGN_CHUNK,
+    poses_per_chunk: int = DESIGN_POSE_CHUNK,
+    quiet: bool = False,
+    desc: str | None = None,
+    done: dict[int, np.ndarray] | None = None,
+    on_chunk: Callable[[int, np.ndarray], None] | None = None,
+) -> dict[str, np.ndarray] | None:
+    """The workspace statistics (:data:`STATS`) of a batch of designs over a grid, in memory.
+
+    Args:
+        designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,).
+        theta_L, delta: the grid's axes (rad).
+        dq: joint-level uncertainty (mm), traced.
+        load: ``None`` or the tip force (3,) / wrench (6,) (N, N mm, base frame), traced: adds the
+            compliance statistics.
+        designs_per_chunk, poses_per_chunk, quiet, desc, done, on_chunk: see
+            :func:`~tension_zones.analysis.sweep_designs`.
+
+    Returns ``{column: (N,)}`` on process 0 (``None`` on the others). Each column equals the NumPy
+    reduction of :func:`~tension_zones.sweep_grid`'s arrays for that design (tested to 1e-12).
+    """
+    args = (np.float64(dq),) if load is None else (np.float64(dq), np.asarray(as_wrench(load)))
+    fn = _kinematic_pose if load is None else _loaded_pose
+    return sweep_designs(fn, designs, theta_L, delta, *args, stats=_stats(load is not None),
+                         designs_per_chunk=designs_per_chunk, poses_per_chunk=poses_per_chunk,
+                         quiet=quiet, desc=desc, done=done, on_chunk=on_chunk)
+
+
+# --------------------------------------------------------------------------------------------
+# The output folder: manifest, chunk files, table
+# --------------------------------------------------------------------------------------------
+def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """Write through a temporary file (same suffix: NumPy keeps the name) and rename it: a file is
+    either complete or absent."""
+    tmp = path.with_name(".tmp-" + path.name)
+    write(tmp)
+    os.replace(tmp, path)
+
+
+def _first_difference(a: dict, b: dict) -> str | None:
+    for k in sorted(set(a) | set(b)):
+        if a.get(k) != b.get(k):
+            return k
+    return None
+
+
+class _Store:
+    """An exploration's folder (process 0 only): ``manifest.json`` (what is explored, which chunks
+    are done), ``chunks/`` (one ``.npy`` per chunk of designs), and at the end the table."""
+
+    def __init__(self, out, space: Space, columns: Sequence[str], log):
+        self.out = Path(out)
+        self.manifest_path = self.out / "manifest.json"
+        ident = {"format": FORMAT, "space": space.raw, "columns": list(columns)}
+        if self.out.exists() and not self.out.is_dir():
+            raise ValueError(f"the output folder {str(self.out)!r} is a file")
+        if self.manifest_path.exists():
+            try:
+                self.manifest = json.loads(self.manifest_path.read_text())
+            except json.JSONDecodeError as e:
+                raise ValueError(f"{str(self.manifest_path)!r} is not valid JSON: {e}") from None
+            old = {k: self.manifest.get(k) for k in ident}
+            if old != ident:
+                key = _first_difference(old["space"] or {}, ident["space"]) if old["format"] == FORMAT else None
+                what = f"space key {key!r} differs" if key else "another format or statistics"
+                raise ValueError(f"{str(self.out)!r} holds another exploration ({what}); refusing to "
+                                 "mix them: choose a new output folder")
+            done = sum(len(v) for v in self.manifest["done"].values())
+            if log:
+                log(f"resuming the exploration in {str(self.out)!r}: {done} of "
+                    f"{self.manifest['chunks_total']} chunks done")
+        elif self.out.exists() and any(self.out.iterdir()):
+            raise ValueError(f"the output folder {str(self.out)!r} is not empty and holds no "
+                             "exploration; refusing to overwrite it")
+        else:
+            self.manifest = {**ident, "done": {str(n): [] for n in space.n_wires},
+                             "chunks_total": sum(-(-space.count(n) // space.designs_per_chunk)
+                                                 for n in space.n_wires),
+                             "complete": False}
+            try:  # an unwritable folder fails here, before any computation
+                (self.out / "chunks").mkdir(parents=True, exist_ok=True)
+                self._save_manifest()
+            except OSError as e:
+                raise ValueError(f"cannot write the output folder {str(self.out)!r}: "
+                                 f"{e.strerror or e}") from None
+
+    def _chunk_path(self, n: int, c: int) -> Path:
+        return self.out / "chunks" / f"n{n}_{c:06d}.npy"
+
+    def _save_manifest(self) -> None:
+        _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))
+
+    def done(self, n: int) -> dict[int, np.ndarray]:
+        """The chunks of ``n`` wires the manifest lists as done, read back (a listed chunk whose file
+        has gone is computed again)."""
+        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][str(n)]}
+        return {c: np.load(p) for c, p in paths.items() if p.exists()}
+
+    def save(self, n: int, c: int, rows: np.ndarray) -> None:
+        """One chunk's rows: the file first, then the manifest (a crash between leaves a file that
+        the manifest does not list, computed again on resuming: nothing is lost or counted twice)."""
+        _write_atomic(self._chunk_path(n, c), lambda p: np.save(p, rows))
+        done = self.manifest["done"][str(n)]
+        if c not in done:
+            done.append(c)
+        self._save_manifest()
+
+    def finish(self, table: dict[str, np.ndarray]) -> list[Path]:
+        paths = [self.out / "table.npz", self.out / "table.csv"]
+        _write_atomic(paths[0], lambda p: np.savez(p, **table))
+        _write_atomic(paths[1], lambda p: write_csv(table, p))
+        self.manifest["complete"] = True
+        self._save_manifest()
+        return paths
+
+
+def write_csv(table: dict[str, np.ndarray], path) -> None:
+    """A table (columns of equal length) as CSV: a header line, then one row per design."""
+    keys = list(table)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(keys)
+        for row in zip(*(table[k].tolist() for k in keys)):
+            w.writerow(row)
+
+
+def _open_store(out, space: Space, columns, log) -> _Store | None:
+    """The store on process 0; every process learns whether it could be opened (one broadcast), so
+    that a refused folder stops all of them instead of leaving the others waiting."""
+    store, error = None, None
+    if jax.process_index() == 0:
+        try:
+            store = _Store(out, space, columns, log)
+        except (ValueError, OSError) as e:
+            error = e
+    if jax.process_count() > 1:
+        from jax.experimental import multihost_utils
+
+        ok = bool(multihost_utils.broadcast_one_to_all(np.int32(error is None)))
+        if not ok and error is None:
+            raise ValueError("process 0 could not open the output folder (see its error)")
+    if error is not None:
+        raise error
+    return store
+
+
+def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[str, np.ndarray] | None:
+    """Explore a design space: every design's workspace statistics, as one table.
+
+    Args:
+        space: from :func:`~tension_zones.load_space` / :func:`~tension_zones.parse_space`.
+        out: ``None`` (in memory only) or a folder: a new or empty one, or one holding this same
+            exploration, which is then resumed (a folder holding anything else is refused).
+        quiet: no progress bar.
+        log: called with one line when an exploration is resumed (e.g. ``print``).
+
+    Returns the table ``{column: (N,)}`` (rows: the designs of each wire count in turn; columns:
+    ``design``, ``n_wires``, the design fields, ``wire_angle_k_deg``, then :data:`STATS`) on
+    process 0, ``None`` on the other processes of a ``jax.distributed`` run. With ``out``, also
+    ``manifest.json``, ``chunks/``, ``table.npz`` and ``table.csv`` there (process 0 writes).
+    """
+    columns = [s[0] for s in _stats(space.load is not None)]
+    store = None if out is None else _open_store(out, space, columns, log)
+    first = jax.process_index() == 0
+    parts = []
+    for n in space.n_wires:
+        done = store.done(n) if store is not None else None
+        on_chunk = (lambda c, rows, n=n: store.save(n, c, rows)) if store is not None else None
+        stats = explore_designs(space.batch(n), space.theta_L, space.delta, space.dq, space.load,
+                                designs_per_chunk=space.designs_per_chunk,
+                                poses_per_chunk=space.poses_per_chunk, quiet=quiet,
+                                desc=f"{n} wires", done=done, on_chunk=on_chunk)
+        if first:
+            parts.append({**space.columns(n), **stats})
+    if not first:
+        return None
+    table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    table = {"design": np.arange(len(table["n_wires"])), **table}
+    if store is not None:
+        store.finish(table)
+    return table
+
+
+# --------------------------------------------------------------------------------------------
+# Pareto front
+# --------------------------------------------------------------------------------------------
+def _objectives(columns: Sequence[str], known) -> list[tuple[str, float]]:
+    """``(column, sign)`` with sign -1 for a column to maximise (:func:`objective`); two or three
+    columns, each one of ``known``."""
+    if not 2 <= len(columns) <= 3:
+        raise ValueError(f"a Pareto front takes two or three columns, got {len(columns)}: {list(columns)}")
+    out = []
+    for c in columns:
+        name, best = objective(c)
+        if name not in known:
+            raise ValueError(f"front column {name!r} is not a column of the table; columns: {list(known)}")
+        out.append((name, -1.0 if best == "max" else 1.0))
+    return out
+
+
+def table_columns(space: Space) -> list[str]:
+    """The columns of :func:`explore`'s table for ``space``, in order."""
+    stats = [c for c, _, _ in _stats(space.load is not None)]
+    return ["design", *space.column_names(), *stats]
+
+
+def check_front(space: Space, columns: Sequence[str]) -> None:
+    """Raise ``ValueError`` (naming it) for a front column the exploration of ``space`` will not have."""
+    _objectives(columns, table_columns(space))
+
+
+def pareto_front(table: dict[str, np.ndarray], columns: Sequence[str]) -> np.ndarray:
+    """Which designs are on the Pareto front of two or three columns, (N,) bool.
+
+    A design is on the front when no other design is at least as good in every column and better in
+    one (designs with equal values share their fate). Each column is minimised or maximised as
+    :func:`sense` says, unless written ``"min:name"`` / ``"max:name"``. Designs with a NaN in these
+    columns are not on it.
+    """
+    obj = _objectives(columns, list(table))
+    X = np.stack([s * np.asarray(table[c], float) for c, s in obj], axis=1)  # all minimised
+    ok = np.flatnonzero(np.all(np.isfinite(X), axis=1))
+    order = ok[np.lexsort(X[ok].T[::-1])]
+    Xs = X[order]
+    new = np.ones(len(order), bool)  # the first of each run of equal points
+    new[1:] = np.any(Xs[1:] != Xs[:-1], axis=1)
+    on = np.zeros(len(X), bool)
+    on[order] = _undominated(Xs[new])[np.cumsum(new) - 1]
+    return on
+
+
+def _undominated(U):
+    """For distinct points sorted lexicographically (every column minimised): which no other point
+    dominates. Only an earlier point can dominate one, and, the points being distinct, an earlier
+    point at least as good in the other columns does. Two columns: one pass with the running minimum
+    of the second. Three: blocks of points against the front so far and against each other
+    (vectorised; whatever dominates a point is on the front or dominated by a front member)."""
+    if U.shape[1] == 2:
+        best = np.minimum.accumulate(np.concatenate([[np.inf], U[:-1, 1]]))
+        return U[:, 1] < best
+    keep = np.zeros(len(U), bool)
+    front = U[:0]
+    for start in range(0, len(U), 128):
+        B = U[start:start + 128]
+        beaten = np.zeros(len(B), bool)
+        for other in (front, B):  # [i, j]: other j dominates point i
+            le, lt = other[None] <= B[:, None], other[None] < B[:, None]
+            beaten |= np.any(np.all(le, axis=2) & np.any(lt, axis=2), axis=1)
+        keep[start:start + len(B)] = ~beaten
+        front = np.concatenate([front, B[~beaten]])
+    return keep
+
+
+def default_front(space: Space) -> list[str]:
+    """Size against performance: the pitch radius (smaller is more compact), the worst reduced
+    position uncertainty, and the worst reduced deflection with a load or else the controllable
+    fraction. (The statistics alone mostly improve together with a larger radius and stiffer
+    wires, so a front of statistics only often holds one design per wire count.)"""
+    third = "deflection_mm_reduced_worst" if space.load is not None else "controllable_fraction"
+    return ["pitch_radius_mm", "dp_max_reduced_worst", third]
+
+
+def write_front(table: dict[str, np.ndarray], out, columns: Sequence[str]) -> list[Path]:
+    """``front.csv`` (the front's rows), ``front.png`` (scatter with the front) and
+    ``parallel.png`` (parallel coordinates) in ``out``; returns their paths."""
+    from ..plots import plot_front, plot_parallel
+
+    out = Path(out)
+    on = pareto_front(table, columns)
+    paths = [out / "front.csv", out / "front.png", out / "parallel.png"]
+    write_csv({k: v[on] for k, v in table.items()}, paths[0])
+    plot_front(table, columns, on, paths[1])
+    plot_parallel(table, columns, on, paths[2])
+    return paths
+
+
+def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]) -> str:
+    """One line: what was explored and how the front looks."""
+    on = pareto_front(table, columns)
+    counts = sorted(set(table["n_wires"].tolist()))
+    share = ", ".join(f"{n} wires: {int(np.sum(on & (table['n_wires'] == n)))}" for n in counts)
+    return (f"explored {table['n_wires'].size} designs ({', '.join(map(str, counts))} wires) in "
+            f"{seconds:.1f} s; Pareto front of {' vs '.join(columns)}: {int(on.sum())} designs ({share})")
+
