@@ -173,13 +173,14 @@ ROBOT = {"segments": [
 class RobotTruth:
     """A robot (a ``{"segments": [...]}`` design) and what its design file does not declare.
 
-    ``pattern_rotation_deg``, ``registration`` and ``EI_factors`` are what tracker recordings always
-    have (the nominal parameters of such data); the rest are effects (all zero = none).
+    ``pattern_rotation_deg``, ``translation``, a rotation about the robot's axis and ``EI_factors`` are
+    what tracker recordings always have (the nominal parameters of such data); the rest, a tilt of the
+    tracker (``registration_deg`` about x and y) included, are effects (all zero = none).
     """
 
     design: dict = dataclasses.field(default_factory=lambda: ROBOT)
     pattern_rotation_deg: tuple = (12.0, -20.0)  # per segment
-    registration_deg: tuple = (1.0, -1.5, 4.0)  # tracker <- base rotation vector
+    registration_deg: tuple = (0.0, 0.0, 4.0)  # tracker <- base rotation vector (a tilt is an effect)
     translation: tuple = (2.0, -3.0, 5.0)  # mm
     EI_factors: tuple = (1.2, 0.8)  # per segment
     play: tuple = ()  # per wire, mm

@@ -106,9 +106,9 @@ def test_every_effect_is_defined_for_any_robot_and_null_means_none():
     base = pb.predict(pb.null, names)
     r, J = pb.jacobian(pb.null, names)
     assert np.all(np.isfinite(J))
-    # without the pattern rotation in the model the registration also turns about the robot's axis
-    # (with it, it leaves that axis to the patterns: see effects/registration.py)
-    J = pb.jacobian(pb.null, [n for n in names if n != "pattern_rotation"])[1]
+    # without the pattern rotation and the offset in the model the registration also turns about the
+    # robot's axis and translates (with them, it leaves those to them: see effects/registration.py)
+    J = pb.jacobian(pb.null, [n for n in names if n not in ("pattern_rotation", "offset")])[1]
     rng = np.random.default_rng(0)
     for b in ALL:
         theta = pb.null.copy()

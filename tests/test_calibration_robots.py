@@ -25,6 +25,7 @@ EFFECTS = {
     "gravity": RobotTruth(gravity=(0.0, 0.002, -0.003)),
     "marker": RobotTruth(marker=(3.0, -2.0, 4.0)),
     "geometry": RobotTruth(d_length=(2.0, -3.0), d_radius=(0.3, -0.4)),
+    "registration": RobotTruth(registration_deg=(1.0, -1.5, 4.0)),
 }
 
 
@@ -57,14 +58,13 @@ def test_nominal_robot_gets_nothing(tmp_path):
     rep = run(tmp_path, "nominal", RobotTruth(), seed=5)
     assert names(rep) == [] and not rep["unexplained_structure"]
     assert rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
-    # the nominal parameters are the truth's: pattern rotations, registration, stiffness
+    # the nominal parameters are the truth's: the base's position in the tracker frame, the patterns'
+    # rotations (which carry the tracker's rotation about the robot's axis: without a load, one
+    # quantity), the stiffness
     fitted = rep["parameters"]["fitted"]
-    # (about the robot's axis the registration and a common pattern rotation are one quantity: the
-    # registration leaves it to the patterns, which then carry the tracker's rotation about z too)
-    rot = np.array(list(fitted["registration"].values()))
-    assert rot[2] == 0.0 and rep["parameters"]["std"]["registration"]["rot_z_deg"] is None
-    np.testing.assert_allclose(rot[:2], [1.0, -1.5], atol=0.3)
+    np.testing.assert_allclose(list(fitted["offset"].values()), [2.0, -3.0, 5.0], atol=0.3)
     np.testing.assert_allclose(list(fitted["pattern_rotation"].values()), np.array([12.0, -20.0]) + 4.0, atol=0.5)
+    np.testing.assert_allclose(list(fitted["backbone_EI"].values()), [1.2 * 1500.0, 0.8 * 3000.0], rtol=0.1)
 
 
 def test_an_effect_outside_the_library_is_flagged_not_misnamed(tmp_path):

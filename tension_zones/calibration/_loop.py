@@ -420,10 +420,11 @@ def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
     residual's features."""
     th = np.asarray(theta).copy()
     sl = pb.spec.slices()
-    for name in ("registration", "marker"):
+    frame = ("registration", "offset", "marker")
+    for name in frame:
         if name in sl:
             th[sl[name]] = pb.null[sl[name]]
-    return pb.predict(th, [a for a in active if a not in ("registration", "marker")])
+    return pb.predict(th, [a for a in active if a not in frame])
 
 
 #: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.

@@ -129,6 +129,33 @@ def load_gradient(lengths, x, f, g):
     return -(Gt.T @ f + Gm.T @ g)
 
 
+@jax.custom_jvp
+def _load_jacobians(lengths, x):
+    """:func:`load_jacobians` whose derivative in the lengths is taken once for the ``S`` lengths (forward
+    mode) and then contracted with any number of tangents: a calibration's Jacobian pushes dozens of
+    tangents through here, nearly all of them zero in the lengths, and the configuration carries none."""
+    return load_jacobians(lengths, x)
+
+
+def _load_jacobians_jvp(primals, tangents):
+    lengths, x = primals
+    dL, dx = tangents
+    out = load_jacobians(lengths, x)
+    zero = tuple(jnp.zeros_like(o) for o in out)
+    if type(dL) is jax.custom_derivatives.SymbolicZero:
+        d = zero
+    else:
+        JL = jax.jacfwd(load_jacobians, argnums=0)(lengths, x)  # ((3, 2S, S), (3, 2S, S)): once, not per tangent
+        d = tuple(j @ dL for j in JL)
+    if type(dx) is not jax.custom_derivatives.SymbolicZero:
+        _, dxo = jax.jvp(lambda y: load_jacobians(lengths, y), (x,), (dx,))
+        d = tuple(a + b for a, b in zip(d, dxo))
+    return out, d
+
+
+_load_jacobians.defjvp(_load_jacobians_jvp, symbolic_zeros=True)
+
+
 class _Sample:
     """The pieces of ``V`` and ``F`` for one sample, gradient and generalised Hessian written out.
 
@@ -165,9 +192,12 @@ class _Sample:
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
         return 0.5 * jnp.dot(self.E * x, x) + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
 
-    def grad(self, x, t):
+    def load_grad(self, x):
+        return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
+
+    def grad(self, x, t, load_grad=None):
         tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
-        load = self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
+        load = self.load_grad(x) if load_grad is None else load_grad
         return self.E * x + self.A.T @ tau + load
 
     def _load_hessian(self, x):
@@ -186,10 +216,18 @@ class _Sample:
         return self._if_loaded(fd, x, jnp.zeros((x.shape[0],) * 2, x.dtype))
 
     def hess(self, x, t):
-        """Generalised Hessian of ``V`` with ``t`` frozen (the Newton step's matrix): exact for the
-        backbone and the wires, :meth:`_load_hessian` for the load."""
+        """Generalised Hessian of ``V`` with ``t`` frozen: exact for the backbone and the wires,
+        :meth:`_load_hessian` for the load (the exact implicit derivative uses it)."""
+        return self.newton_matrix(x, t) + self._load_hessian(x)
+
+    def newton_matrix(self, x, t):
+        """The Newton step's matrix: the backbone's and the taut wires' Hessian, positive definite.
+        The load's curvature is left out: it is small against the wires' (a tip force or a weight on
+        a robot that holds it) and may be indefinite; the line search and the fixed point make up for
+        it at a few more iterations, each much cheaper (no differences of the load's gradient, a
+        Cholesky solve instead of an eigendecomposition)."""
         taut = (self.stretch(x) > 0).astype(x.dtype)
-        return jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A + self._load_hessian(x)
+        return jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A
 
     def force(self, x):
         """The generalised force ``F(x)`` whose root is the equilibrium (``t`` depends on ``x``).
@@ -200,7 +238,8 @@ class _Sample:
         tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
 
         def loaded(y):
-            return load_gradient(self.lengths, y, self.f, self.g)
+            Gt, Gm = _load_jacobians(self.lengths, y)
+            return -(Gt.T @ self.f + Gm.T @ self.g)
 
         def unloaded(y):
             Gt, Gm = jax.lax.stop_gradient(load_jacobians(self.lengths, y))
@@ -222,42 +261,46 @@ class _Sample:
 
 
 def _newton(sm: _Sample, x0):
+    """Damped Newton on ``V`` (``t`` frozen within a step): the backbone's and the wires' Hessian exact,
+    the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
+    the start and without a load), so that a loaded solve converges superlinearly without second
+    derivatives of the chain. Where that matrix is not positive definite the step falls back to the
+    elastic part alone. Steps are capped (``MAX_STEP``) and the largest of ``_STEPS`` with Armijo's
+    decrease is taken."""
     steps = jnp.asarray(_STEPS, x0.dtype)
+    n = x0.shape[0]
 
-    def direction(H, g):
-        # unloaded, H is positive definite (backbone + taut wires): a Cholesky solve; loaded, it may
-        # not be (a load can destabilise): Newton on |eigenvalues| (at least 1e-3 of the largest), a
-        # descent direction of sensible length along a negative curvature too
-        def eig(Hg):
-            H, g = Hg
-            w, Q = jnp.linalg.eigh(H)
-            floor = 1e-3 * jnp.maximum(jnp.max(jnp.abs(w)), 1e-12)
-            return -Q @ ((Q.T @ g) / jnp.maximum(jnp.abs(w), floor))
-
-        def chol(Hg):
-            H, g = Hg
-            return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
-
-        return jax.lax.cond(sm.loaded, eig, chol, (H, g))
+    def solve(H, g):
+        return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
     def body(state):
-        x, it, _ = state
+        x, HL, it, _ = state
         t = sm.factor(x)
-        g, H = sm.grad(x, t), sm.hess(x, t)
-        d = direction(H, g)
+        gl = sm.load_grad(x)
+        g, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
+        d_full, d_elastic = solve(H + HL, g), solve(H, g)
+        d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
         v0 = sm.value(x, t)
         vs = jax.vmap(lambda s: sm.value(x + s * d, t))(steps)
         # Armijo with a round-off allowance, so converged steps are not rejected by noise in V
         ok = vs <= v0 + 1e-4 * steps * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
         step = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0) * d
+        x_new = x + step
+        # SR1 update of the load's curvature from the change of its gradient along the step
+        y = sm.load_grad(x_new) - gl
+        r = y - HL @ step
+        rs = jnp.dot(r, step)
+        use = jnp.abs(rs) > 1e-8 * jnp.sqrt(jnp.dot(r, r) * jnp.dot(step, step)) + 1e-300
+        HL = HL + jnp.where(use, jnp.outer(r, r) / jnp.where(use, rs, 1.0), 0.0)
         done = jnp.max(jnp.abs(step)) <= 1e-13 * (1.0 + jnp.max(jnp.abs(x)))
-        return x + step, it + 1, done
+        return x_new, HL, it + 1, done
 
     def cond(state):
-        return (state[1] < MAX_ITER) & ~state[2]
+        return (state[2] < MAX_ITER) & ~state[3]
 
-    x, _, _ = jax.lax.while_loop(cond, body, (x0, jnp.asarray(0), jnp.asarray(False)))
+    init = (x0, jnp.zeros((n, n), x0.dtype), jnp.asarray(0), jnp.asarray(False))
+    x, _, _, _ = jax.lax.while_loop(cond, body, init)
     return x
 
 

@@ -11,6 +11,7 @@ from .friction import Friction
 from .geometry import Geometry
 from .gravity import Gravity
 from .marker import Marker
+from .offset import Offset
 from .pattern_rotation import PatternRotation
 from .preload import Preload
 from .registration import Registration
@@ -19,17 +20,20 @@ from .wire_angle_offset import WireAngleOffset
 from .wire_stiffness import WireStiffness
 
 #: Every effect, in the order reports list them.
-ALL = (BackboneEI(), PatternRotation(), Registration(), Backlash(), Friction(), WireAngleOffset(),
+ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
        WireStiffness(), Preload(), TipForce(), Gravity(), Marker(), Geometry())
 #: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
-#: in an unregistered tracker frame where which way each segment's wires point is unknown too.
-NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "registration")}
+#: in an unregistered tracker frame, whose origin is never known, nor which way each segment's wires
+#: point (a rotation of the tracker is a candidate: the registration).
+NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "offset")}
+#: Not candidates either: in the base frame the offset is part of the registration.
+EXCLUDED = {"base": ("offset",), "tracker": ()}
 BY_NAME = {e.name: e for e in ALL}
 
 
 def library(frame: str = "base") -> tuple[Effect, ...]:
     """The candidate effects for data in ``frame``: every effect that is not nominal there."""
-    return tuple(e for e in ALL if e.name not in NOMINAL[frame])
+    return tuple(e for e in ALL if e.name not in NOMINAL[frame] + EXCLUDED[frame])
 
 
 def nominal(frame: str = "base") -> tuple[Effect, ...]:
@@ -37,5 +41,5 @@ def nominal(frame: str = "base") -> tuple[Effect, ...]:
 
 
 __all__ = ["ALL", "BY_NAME", "NOMINAL", "BackboneEI", "Backlash", "Effect", "Friction", "Geometry", "Gravity",
-           "Marker", "PatternRotation", "Preload", "Registration", "TipForce", "WireAngleOffset", "WireStiffness",
+           "Marker", "Offset", "PatternRotation", "Preload", "Registration", "TipForce", "WireAngleOffset", "WireStiffness",
            "library", "nominal", "play"]

@@ -5,7 +5,8 @@ tip orientation turns with it. Nominal for recordings in an unregistered tracker
 
 Without a load, a rotation about the robot's axis and a common rotation of every segment's wire
 pattern move the tip alike: while :mod:`.pattern_rotation` is part of the model, the registration
-leaves that axis (``w_z``) to it, so that neither is a free direction of the fit.
+leaves that axis (``w_z``) to it, and while :mod:`.offset` is, the translation to that, so that no
+parameter is a free direction of the fit.
 """
 
 import dataclasses
@@ -38,5 +39,6 @@ class Registration(Effect):
     def on_outputs(self, theta, out, model, on):
         w = theta[:3] * jnp.stack([1.0, 1.0, 1.0 - on.get("pattern_rotation", 0.0)])
         R = rotvec_to_matrix(w)
-        return replace(out, p=jnp.einsum("ij,nj->ni", R, out["p"]) + theta[3:],
+        t = theta[3:] * (1.0 - on.get("offset", 0.0))
+        return replace(out, p=jnp.einsum("ij,nj->ni", R, out["p"]) + t,
                        R=jnp.einsum("ij,njk->nik", R, out["R"]))
