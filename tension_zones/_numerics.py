@@ -17,6 +17,8 @@ import math
 import jax
 import jax.numpy as jnp
 
+from . import _config  # noqa: F401  (float64 before any array is made)
+
 
 def float_dtype(*xs):
     """The floating dtype the inputs promote to (float64 when x64 is on and nothing says otherwise)."""

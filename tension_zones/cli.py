@@ -6,10 +6,15 @@ Errors are one line on stderr (``tension-zones: error: ...``) and exit status 2,
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+# Only the standard library and NumPy at import: `tension-zones --help` and `CMD --help` never import
+# JAX (each command imports what it needs when it runs).
 
 
 class CLIError(Exception):
@@ -40,27 +45,74 @@ def _design(args, length=20.0, pitch_radius=2.0):
         raise CLIError(str(e)) from None
 
 
-def _out_path(path: str, suffix: str) -> Path:
+# ---- output paths: checked before any computation, never overwritten without --force -----------
+def _probe_writable(folder: Path, flag: str) -> None:
+    """Create and remove a file in ``folder``: the one test that also catches read-only file systems
+    and permissions that ``os.access`` misreports."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tension-zones-probe-")
+    except OSError as e:
+        raise CLIError(f"{flag}: cannot write in the folder {str(folder)!r} "
+                       f"({e.strerror or type(e).__name__})") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def _check_out_file(path: str, suffix: str, force: bool = False, flag: str = "--out") -> Path:
+    """An output file ``path``: ends in ``suffix``, is not a folder, its folder exists and is
+    writable, and it does not exist yet unless ``force``. Returns it as a ``Path``."""
     p = Path(path)
     if p.suffix.lower() != suffix:
-        raise CLIError(f"--out must end in {suffix}, got {path!r}")
+        raise CLIError(f"{flag} must end in {suffix}, got {path!r}")
+    if p.is_dir():
+        raise CLIError(f"{flag} must be a file, {path!r} is a folder")
     if not p.parent.exists():
-        raise CLIError(f"the folder of --out does not exist: {str(p.parent)!r}")
+        raise CLIError(f"the folder of {flag} does not exist: {str(p.parent)!r}")
+    if not p.parent.is_dir():
+        raise CLIError(f"the folder of {flag} is a file: {str(p.parent)!r}")
+    if p.exists() and not force:
+        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another name")
+    _probe_writable(p.parent, flag)
     return p
 
 
+def _check_out_dir(path: str, force: bool = False, names=None, flag: str = "--out") -> Path:
+    """An output folder ``path``: not a file; it exists and is writable, or its parent does (it is
+    created when the results are written). Without ``force`` it may not already hold any of
+    ``names`` (the files the command writes), or anything at all when ``names`` is None."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"{flag} must be a folder, {path!r} is a file")
+    if out.is_dir():
+        held = (sorted(n for n in names if (out / n).exists()) if names is not None
+                else sorted(p.name for p in out.iterdir()))
+        if held and not force:
+            more = f" and {len(held) - 1} more" if len(held) > 1 else ""
+            raise CLIError(f"{flag} {path!r} already holds {held[0]!r}{more}; pass --force to "
+                           "overwrite, or choose another folder")
+        _probe_writable(out, flag)
+    else:
+        if not out.parent.is_dir():
+            raise CLIError(f"the folder of {flag} does not exist: {str(out.parent)!r}")
+        _probe_writable(out.parent, flag)
+    return out
+
+
 def cmd_maps(args) -> None:
+    out = _check_out_file(args.out, ".png", args.force)
+    design = _design(args)
+
     import matplotlib.pyplot as plt
 
-    from .plots import plot_tension_map
+    from ._io import atomic_path
     from .model._zones import tension_map
+    from .plots import plot_tension_map
 
-    out = _out_path(args.out, ".png")
-    design = _design(args)
     tmap = tension_map(design)
     fig, ax = plt.subplots(figsize=(6.4, 6.8))
     plot_tension_map(tmap, ax=ax)
-    fig.savefig(out, dpi=130, bbox_inches="tight")
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=130, bbox_inches="tight")
     plt.close(fig)
     print(tmap.table())
     if not args.quiet:
@@ -68,23 +120,22 @@ def cmd_maps(args) -> None:
 
 
 def cmd_reproduce(args) -> None:
+    out = _check_out_dir(args.out, args.force)
     from .paper._reproduce import reproduce
 
-    reproduce(Path(args.out), quiet=args.quiet)
+    reproduce(out, quiet=args.quiet)
 
 
 # --- optimize (issue 5) -----------------------------------------------------------------------
 def cmd_optimize(args) -> None:
-    from .design._optimise import optimize, write_outputs
+    from .design._optimise import OUTPUT_FILES, optimize, write_outputs
     from .design._scenario import load_scenario
 
     try:
         sc = load_scenario(args.scenario)
     except ValueError as e:
         raise CLIError(str(e)) from None
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out must be a folder, got the file {args.out!r}")
+    out = _check_out_dir(args.out, args.force, OUTPUT_FILES)
     result = optimize(sc, progress=not args.quiet)
     paths = write_outputs(result, out)
     best = result["best"]
@@ -142,10 +193,10 @@ def _with_compliance(args):
 
 
 def cmd_sweep(args) -> None:
-    from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
     from .analysis._sweep import grid_deg, sweep_grid
+    from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
 
-    out = _out_path(args.out, ".npz")
+    out = _check_out_file(args.out, ".npz", args.force)
     if args.compliance:
         missing = [f for f in ("wire_stiffness", "backbone_EI", "load") if getattr(args, f) is None]
         if missing:
@@ -174,7 +225,10 @@ def cmd_sweep(args) -> None:
     res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
                      quiet=args.quiet, desc="sweep" + (" + compliance" if args.compliance else ""))
     th, de = np.meshgrid(theta_deg, delta_deg, indexing="ij")
-    np.savez(out, theta_L_deg=th, delta_deg=de, **res)
+    from ._io import atomic_path
+
+    with atomic_path(out) as tmp:
+        np.savez(tmp, theta_L_deg=th, delta_deg=de, **res)
     if not args.quiet:
         print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
         if args.compliance and not np.all(res["feasible"]):
@@ -204,6 +258,7 @@ def _add_sweep_parser(sub) -> None:
     c.add_argument("--load", help="tip force FX,FY,FZ (N, base frame), or six wrench components")
     c.add_argument("--preload", type=float, help="wire preload f_min (N, default 0)")
     s.add_argument("--out", required=True, help="output .npz file")
+    _add_force(s, "an existing --out file")
     s.add_argument("--quiet", action="store_true", help="no progress bar or messages")
     s.set_defaults(func=cmd_sweep)
 
@@ -310,6 +365,10 @@ def _add_calibrate_parser(sub) -> None:
 # ---- end calibrate ----------------------------------------------------------------------------
 
 
+def _add_force(parser, what: str) -> None:
+    parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="tension-zones",
@@ -321,17 +380,20 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--wires", type=int, required=True, help="number of wires (>= 3)")
     m.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
     m.add_argument("--out", required=True, help="output PNG file")
+    _add_force(m, "an existing --out file")
     m.add_argument("--quiet", action="store_true", help="print only the table")
     m.set_defaults(func=cmd_maps)
 
     o = sub.add_parser("optimize", help="search wire count, pitch radius, stiffness and placement")
     o.add_argument("--scenario", required=True, help="scenario JSON (keys: see the README)")
     o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
+    _add_force(o, "an earlier result in --out")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
     o.set_defaults(func=cmd_optimize)
 
     r = sub.add_parser("reproduce", help="reproduce the paper's figures and tables into a folder")
     r.add_argument("--out", default="reproduce_out", help="output folder (default: reproduce_out)")
+    _add_force(r, "the files of a non-empty --out folder")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     r.set_defaults(func=cmd_reproduce)
     _add_sweep_parser(sub)  # issue 3
@@ -339,16 +401,17 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _one_line(e: Exception) -> str:
+    return " ".join(line.strip() for line in str(e).splitlines() if line.strip()) or type(e).__name__
+
+
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
         args.func(args)
-    except CLIError as e:
-        print(f"tension-zones: error: {e}", file=sys.stderr)
-        return 2
-    except (ValueError, FileNotFoundError, PermissionError, IsADirectoryError) as e:
-        print(f"tension-zones: error: {e}", file=sys.stderr)
+    except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files
+        print(f"tension-zones: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("tension-zones: interrupted", file=sys.stderr)

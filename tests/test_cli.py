@@ -97,3 +97,32 @@ def test_sweep_compliance_errors(tmp_path, capsys, extra, needle):
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
     assert not out.exists()
+
+
+LAZY = """
+import sys, time
+t0 = time.perf_counter()
+from tension_zones.cli import main
+for argv in (["--help"], ["maps", "--help"], ["sweep", "--help"], ["optimize", "--help"],
+             ["reproduce", "--help"], ["calibrate", "--help"]):
+    try:
+        main(argv)
+    except SystemExit as e:
+        assert e.code == 0, (argv, e.code)
+import tension_zones as tz
+assert "jax" not in sys.modules, sorted(m for m in sys.modules if m.startswith("jax"))
+assert "Design" in dir(tz) and "Design" in tz.__all__
+print("help-seconds", time.perf_counter() - t0, file=sys.stderr)
+import jax.numpy as jnp  # imported after the package: float64 is on before any array is made
+assert jnp.ones(1).dtype == jnp.float64
+assert tz.Design(3, 20.0, 2.0).length.dtype == jnp.float64
+for name in tz.__all__:
+    getattr(tz, name)
+print("lazy ok")
+"""
+
+
+def test_help_and_import_do_not_import_jax():
+    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip().endswith("lazy ok")

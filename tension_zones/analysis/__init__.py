@@ -1,4 +1,5 @@
 """Analysis: single-pose performance measures and the sweep engine that evaluates them over grids."""
 
+from .. import _config  # noqa: F401  (float64 before any array is made)
 from ._metrics import DEFAULT_DQ, MEASURES, pose_measures, pose_metrics, zonogon_vertices
 from ._sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses

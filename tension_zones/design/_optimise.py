@@ -408,17 +408,25 @@ def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     return _result_row(design.n_wires, design, exact, pieces)
 
 
+#: The files :func:`write_outputs` writes into its folder.
+OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
+
+
 def write_outputs(result: dict[str, Any], out_dir) -> list:
-    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``."""
+    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``; each file
+    appears complete or not at all (:func:`tension_zones._io.atomic_path`)."""
     import json
     from pathlib import Path
 
+    from .._io import atomic_path, write_text
     from ..plots import plot_convergence, plot_tradeoff
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "result.json", out / "tradeoff.png", out / "convergence.png"]
-    paths[0].write_text(json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
-    plot_tradeoff(result, paths[1])
-    plot_convergence(result, paths[2], INFEASIBLE_RANK)
+    paths = [out / name for name in OUTPUT_FILES]
+    write_text(paths[0], json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
+    with atomic_path(paths[1]) as tmp:
+        plot_tradeoff(result, tmp)
+    with atomic_path(paths[2]) as tmp:
+        plot_convergence(result, tmp, INFEASIBLE_RANK)
     return paths

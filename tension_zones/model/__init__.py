@@ -4,6 +4,7 @@ Constant-curvature kinematics written once per segment (``_kinematics``) and cha
 tension zones and masks (``_zones``); tension-only statics and compliance (``_statics``).
 """
 
+from .. import _config  # noqa: F401  (float64 before any array is made)
 from ._design import DEFAULT_BACKBONE_EI, DEFAULT_WIRE_STIFFNESS, Design, read_json
 from ._kinematics import (
     THETA_0,
