@@ -126,3 +126,22 @@ def test_help_and_import_do_not_import_jax():
     r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip().endswith("lazy ok")
+
+
+@pytest.mark.parametrize("n", [16, 64])
+def test_maps_of_many_wires_stay_legible(tmp_path, n):
+    """Issue 14: 64 wires drew a black band of labels. Above plots.LABEL_MAX_WIRES the sectors carry
+    at most their taut count, and only every few rings is numbered."""
+    import matplotlib.pyplot as plt
+
+    import tension_zones as tz
+    from tension_zones.plots import LABEL_MAX_WIRES, plot_tension_map
+
+    assert n > LABEL_MAX_WIRES
+    fig, ax = plt.subplots()
+    plot_tension_map(tz.tension_map(tz.Design(n, 20.0, 2.0)), ax=ax)
+    labels = [t.get_text() for t in ax.texts]
+    plt.close(fig)
+    assert len(labels) <= 40, len(labels)  # before: 204 at 64 wires (every sector, ray and ring)
+    assert all("," not in t for t in labels)  # no lists of wires
+    assert main(["maps", "--wires", str(n), "--out", str(tmp_path / "m.png"), "--quiet"]) == 0
