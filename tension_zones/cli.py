@@ -21,7 +21,26 @@ class CLIError(Exception):
     """A user-facing error: printed as one line."""
 
 
+#: The largest wire count the command line takes (the library takes any): the measures cost n^2 per
+#: pose above 8 wires, so 256 wires sweep the default grid in seconds and far more would not.
+MAX_WIRES = 256
+#: The largest sweep grid the command line takes: 10^7 poses hold 1.4 GB of kinematic results.
+MAX_SWEEP_POSES = 20_000_000
+#: Design fields -> the flags that set them (a design error names the flag).
+_FLAG_OF_FIELD = {"n_wires": "--wires", "length": "--length", "pitch_radius": "--pitch-radius",
+                  "wire_angles": "--angles", "wire_angles_deg": "--angles",
+                  "wire_stiffness": "--wire-stiffness", "backbone_EI": "--backbone-EI",
+                  "preload": "--preload"}
+
+
+def _design_error(e: ValueError) -> CLIError:
+    """A design's one-line ValueError, prefixed with the flag of the field it names."""
+    flag = _FLAG_OF_FIELD.get(str(e).split(" ", 1)[0])
+    return CLIError(f"{flag}: {e}" if flag else str(e))
+
+
 def _parse_angles(text: str | None, n_wires: int | None):
+    """``--angles`` in degrees (a list), checked for count and finiteness."""
     if text is None:
         return None
     try:
@@ -30,19 +49,25 @@ def _parse_angles(text: str | None, n_wires: int | None):
         raise CLIError(f"--angles must be comma-separated numbers in degrees, got {text!r}") from None
     if n_wires is not None and len(vals) != n_wires:
         raise CLIError(f"--angles has {len(vals)} values but --wires is {n_wires}")
-    return np.radians(vals)
+    if not np.all(np.isfinite(vals)):
+        raise CLIError(f"--angles must be finite numbers in degrees, got {text!r}")
+    return vals
 
 
 def _design(args, length=20.0, pitch_radius=2.0):
-    from .model._design import Design
+    from .model._design import Design, _check_angles
 
-    d = {"n_wires": args.wires, "length_mm": length, "pitch_radius_mm": pitch_radius}
-    if getattr(args, "angles", None) is not None:
-        d["wire_angles_deg"] = np.degrees(_parse_angles(args.angles, args.wires)).tolist()
+    if args.wires > MAX_WIRES:
+        raise CLIError(f"--wires must be at most {MAX_WIRES} on the command line, got {args.wires} "
+                       "(tension_zones.Design takes any count)")
+    angles = _parse_angles(getattr(args, "angles", None), args.wires)
     try:
-        return Design.from_dict(d)
+        if angles is not None:
+            _check_angles(angles, args.wires, field="wire_angles_deg")  # its message in degrees
+        return Design(args.wires, length, pitch_radius,
+                      wire_angles=None if angles is None else np.radians(angles))
     except ValueError as e:
-        raise CLIError(str(e)) from None
+        raise _design_error(e) from None
 
 
 # ---- output paths: checked before any computation, never overwritten without --force -----------
@@ -193,7 +218,7 @@ def _with_compliance(args):
 
 
 def cmd_sweep(args) -> None:
-    from .analysis._sweep import grid_deg, sweep_grid
+    from .analysis._sweep import grid_deg, grid_size, sweep_grid
     from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
 
     out = _check_out_file(args.out, ".npz", args.force)
@@ -209,18 +234,23 @@ def cmd_sweep(args) -> None:
             design = design.replace(wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI,
                                     preload=args.preload or 0.0)
         except ValueError as e:
-            raise CLIError(str(e)) from None
+            raise _design_error(e) from None
     for name in ("theta_step", "delta_step", "dq"):
         if getattr(args, name) is not None:
             _positive("--" + name.replace("_", "-"), getattr(args, name))
+    steps = (args.theta_step or 5.0, args.delta_step or 2.5)
+    size = grid_size(85.0, steps[0]) * grid_size(360.0, steps[1])
+    if size > MAX_SWEEP_POSES:  # checked before the grid is built
+        raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} poses; the "
+                       f"command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid from Python takes more)")
     if args.compliance and args.theta_step is None:
         theta_deg = np.asarray(PAPER_THETA_L_DEG)  # the paper's Sec. 6.2 grid
     else:
-        theta_deg = grid_deg(85.0, args.theta_step or 5.0)  # Sec. 6.1: 0..85 deg, ends included
+        theta_deg = grid_deg(85.0, steps[0])  # Sec. 6.1: 0..85 deg, ends included
     if args.compliance and args.delta_step is None:
         delta_deg = np.asarray(PAPER_DELTA_DEG)
     else:
-        delta_deg = grid_deg(360.0, args.delta_step or 2.5)
+        delta_deg = grid_deg(360.0, steps[1])
     fn, extra = _with_compliance(args) if args.compliance else SWEEP_MEASURES[args.measure](args)
     res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
                      quiet=args.quiet, desc="sweep" + (" + compliance" if args.compliance else ""))
@@ -369,8 +399,16 @@ def _add_force(parser, what: str) -> None:
     parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the command line's error rule: one line, exit status 2 (no usage block)."""
+
+    def error(self, message):
+        cmd = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(2, f"tension-zones: error: {cmd}{_one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="tension-zones",
         description="Tension transition zones and reduced Jacobians for wire-actuated continuum robots.",
     )
@@ -407,7 +445,10 @@ def _one_line(e: Exception) -> str:
 
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # --help (0) or a usage error (2, one line): a status, not an exception
+        return e.code if isinstance(e.code, int) else 2
     try:
         args.func(args)
     except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files

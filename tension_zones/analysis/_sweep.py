@@ -54,12 +54,16 @@ def grid_deg(stop: float, step: float, start: float = 0.0) -> np.ndarray:
 
     ``grid_deg(85, 5)`` is 0, 5, ..., 85 (18 values); ``grid_deg(360, 2.5)`` is 0, ..., 360 (145).
     """
+    return start + step * np.arange(grid_size(stop, step, start), dtype=float)
+
+
+def grid_size(stop: float, step: float, start: float = 0.0) -> int:
+    """The number of values of :func:`grid_deg` (checked without building the grid)."""
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"a grid step must be a positive number of degrees, got {step}")
     if not (math.isfinite(start) and math.isfinite(stop)) or stop < start:
         raise ValueError(f"a grid needs start <= stop, got {start} .. {stop}")
-    count = int(math.floor((stop - start) / step + 1e-9)) + 1
-    return start + step * np.arange(count, dtype=float)
+    return int(math.floor((stop - start) / step + 1e-9)) + 1
 
 
 def _eval_chunk(fn, design, theta_L, delta, args):

@@ -26,7 +26,6 @@ import numpy as np
 
 from .._numerics import (
     eps_of,
-    gram_pinv_cols,
     keep,
     nan_where,
     not_finite,
@@ -181,11 +180,25 @@ def _arc_free_mask(A, rhs, f_min):
     order = jnp.argsort(jnp.arctan2(A[1], A[0]))  # the wires in angular order
     a0, a1 = A[0][order], A[1][order]
     start, length = _arc_runs(n)
-    j = np.arange(n)
-    memb = jnp.asarray((j[None, :] - start[:, None]) % n < length[:, None], A.dtype)  # (K, n), sorted
-    i00, i01, i11 = jax.vmap(lambda m: gram_pinv_cols(a0 * m, a1 * m))(memb)  # pinv(A_S A_S^T)
-    g00, g01, g11 = memb @ (a0 * a0), memb @ (a0 * a1), memb @ (a1 * a1)  # A_S A_S^T
-    c0, c1 = f_min * ((1.0 - memb) @ a0), f_min * ((1.0 - memb) @ a1)  # the bound wires' pull
+    # sums over each run by differences of prefix sums over the wires twice round (no (K, n) array:
+    # K = n^2 + 1 runs; at 256 wires that would be 134 MB of constants)
+    def run_sum(x):
+        cs = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(jnp.concatenate([x, x]))])
+        return cs[start + length] - cs[start]
+
+    g00, g01, g11 = run_sum(a0 * a0), run_sum(a0 * a1), run_sum(a1 * a1)  # A_S A_S^T
+    det = g00 * g11 - g01 * g01  # the wires of a run span < 180 deg: no two parallel
+    tr = g00 + g11
+    rank2 = (length > 1) & (det > (max(n, 2) * eps_of(A) * tr) ** 2)
+    rank1 = ~rank2 & (tr > 0)
+    det_s, tr_s = jnp.where(rank2, det, 1.0), jnp.where(rank1, tr, 1.0)
+
+    def pinv_entry(adj, g):  # of pinv(A_S A_S^T): adj / det (rank 2), G / tr^2 (rank 1), 0
+        return jnp.where(rank2, adj / det_s, jnp.where(rank1, g / tr_s**2, 0.0))
+
+    i00, i01, i11 = pinv_entry(g11, g00), pinv_entry(-g01, g01), pinv_entry(g00, g11)
+    c0 = f_min * (jnp.sum(a0) - run_sum(a0))  # the bound wires' pull, f_min A 1_{not S}
+    c1 = f_min * (jnp.sum(a1) - run_sum(a1))
     ang = jnp.arctan2(a1, a0)
     first, last = start, (start + length - 1) % n
     span = jnp.mod(ang[last] - ang[first], 2 * jnp.pi)
@@ -207,7 +220,8 @@ def _arc_free_mask(A, rhs, f_min):
             + jnp.abs(g01 * lam0 + g11 * lam1 + c1 - rhs[1])) * inv_norm_A
     viol = jnp.where(runs | (length == 0), wrong + miss, jnp.inf)
     best = jnp.argmin(viol)  # the first of least violation
-    return jnp.zeros(n, A.dtype).at[order].set(memb[best])  # back to the wires' own order
+    member = (np.arange(n) - jnp.asarray(start)[best]) % n < jnp.asarray(length)[best]  # sorted order
+    return jnp.zeros(n, A.dtype).at[order].set(member.astype(A.dtype))  # back to the wires' order
 
 
 def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
