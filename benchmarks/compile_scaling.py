@@ -4,10 +4,10 @@
                                          [--timeout 300] [--json OUT.json]
 
 Each (wire count, measure) runs in a fresh process (no compilation cache shared between cases, and a
-case that runs past ``--timeout`` seconds is stopped and reported as such). Timed: tracing + lowering
-(Python and JAX), XLA compilation, and one run of the compiled chunk (16,384 poses, float64), for the
-per-pose function ``tension-zones sweep`` evaluates: ``pose_metrics`` (kinematics) or ``pose_metrics``
-plus ``compliance_pose`` (``--compliance``).
+case that runs past ``--timeout`` seconds is stopped and reported as such). Timed: tracing and
+lowering (Python and JAX), XLA compilation, and one run of the compiled chunk (16,384 poses,
+float64), for the per-pose function ``tension-zones sweep`` evaluates: ``pose_metrics``
+(kinematics) or ``pose_metrics`` plus ``compliance_pose`` (``--compliance``).
 """
 
 from __future__ import annotations
@@ -53,8 +53,8 @@ print(json.dumps({"n": n, "measure": measure, "trace_lower_s": t1 - t0, "compile
 def run_case(n: int, measure: str, timeout: float) -> dict:
     t0 = time.perf_counter()
     try:
-        r = subprocess.run([sys.executable, "-c", CHILD, str(n), measure], capture_output=True, check=False,
-                           text=True, timeout=timeout)
+        r = subprocess.run([sys.executable, "-c", CHILD, str(n), measure], capture_output=True,
+                           check=False, text=True, timeout=timeout)
     except subprocess.TimeoutExpired:
         return {"n": n, "measure": measure, "error": f"stopped after {timeout:g} s"}
     if r.returncode != 0:
@@ -74,7 +74,8 @@ def main(argv=None) -> int:
     p.add_argument("--json")
     args = p.parse_args(argv)
     rows = []
-    print("| measure | wires | trace + lower (s) | XLA compile (s) | chunk run (s) | poses/s | process wall (s) |")
+    print("| measure | wires | trace + lower (s) | XLA compile (s) | chunk run (s) | poses/s "
+          "| process wall (s) |")
     print("|---|---|---|---|---|---|---|")
     for m in args.measure:
         for n in args.wires:
@@ -84,7 +85,8 @@ def main(argv=None) -> int:
                 print(f"| {m} | {n} | {r['error']} | | | | |", flush=True)
             else:
                 print(f"| {m} | {n} | {r['trace_lower_s']:.2f} | {r['compile_s']:.2f} | "
-                      f"{r['run_s']:.4f} | {r['poses_per_s']:.3g} | {r['wall_s']:.1f} |", flush=True)
+                      f"{r['run_s']:.4f} | {r['poses_per_s']:.3g} | {r['wall_s']:.1f} |",
+                      flush=True)
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=2)

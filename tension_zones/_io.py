@@ -22,7 +22,7 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def atomic_path(path):
-    """``with atomic_path(p) as tmp: write(tmp)``: ``p`` appears, complete, only when the block ends."""
+    """``with atomic_path(p) as tmp: write(tmp)``: ``p`` appears, complete, when the block ends."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
     os.close(fd)

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-# Only the standard library and NumPy at import: `tension-zones --help` and `CMD --help` never import
-# JAX (each command imports what it needs when it runs).
+# Only the standard library and NumPy at import: `tension-zones --help` and `CMD --help` never
+# import JAX (each command imports what it needs when it runs).
 
 
 class CLIError(Exception):
@@ -96,7 +96,8 @@ def _check_out_file(path: str, suffix: str, force: bool = False, flag: str = "--
     if not p.parent.is_dir():
         raise CLIError(f"the folder of {flag} is a file: {str(p.parent)!r}")
     if p.exists() and not force:
-        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another name")
+        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another "
+                       "name")
     _probe_writable(p.parent, flag)
     return p
 
@@ -241,8 +242,9 @@ def cmd_sweep(args) -> None:
     steps = (args.theta_step or 5.0, args.delta_step or 2.5)
     size = grid_size(85.0, steps[0]) * grid_size(360.0, steps[1])
     if size > MAX_SWEEP_POSES:  # checked before the grid is built
-        raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} poses; the "
-                       f"command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid from Python takes more)")
+        raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} "
+                       f"poses; the command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid "
+                       "from Python takes more)")
     if args.compliance and args.theta_step is None:
         theta_deg = np.asarray(PAPER_THETA_L_DEG)  # the paper's Sec. 6.2 grid
     else:
@@ -440,15 +442,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _one_line(e: Exception) -> str:
-    return " ".join(line.strip() for line in str(e).splitlines() if line.strip()) or type(e).__name__
+    lines = (line.strip() for line in str(e).splitlines())
+    return " ".join(line for line in lines if line) or type(e).__name__
 
 
 def main(argv=None) -> int:
     parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as e:  # --help (0) or a usage error (2, one line): a status, not an exception
-        return e.code if isinstance(e.code, int) else 2
+    args = parser.parse_args(argv)  # --help and usage errors (one line, status 2) exit here
     try:
         args.func(args)
     except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files

@@ -65,8 +65,9 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         sectors = [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
     for s in sectors:
         if s.width_deg > 0:
-            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg, fc=_count_colour(s.n_taut, present),
-                               ec="white", lw=1.0 if not many else 0.4))
+            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg,
+                               fc=_count_colour(s.n_taut, present), ec="white",
+                               lw=1.0 if not many else 0.4))
             mid = np.radians(0.5 * (s.start_deg + s.end_deg))
             rad = 0.62 if s.width_deg > 25 else 0.8
             if not many:
@@ -90,8 +91,9 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         if k % ring_step == 0:
             mid = np.radians(0.5 * (a + b))
             r_txt = r_out - (0.04 if not many else 0.4 * ring_w)
-            ax.text(r_txt * np.cos(mid), r_txt * np.sin(mid), str(k + 1), ha="center", va="center",
-                    fontsize=7 if not many else 5, color="white" if not many else "k", fontweight="bold")
+            ax.text(r_txt * np.cos(mid), r_txt * np.sin(mid), str(k + 1), ha="center",
+                    va="center", fontsize=7 if not many else 5,
+                    color="white" if not many else "k", fontweight="bold")
     r_max = ring0 + (n + 1) * ring_w
     for deg in range(0, 360, 30):
         a = np.radians(deg)
@@ -100,7 +102,8 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         ax.text((r_max + 0.13) * np.cos(a), (r_max + 0.13) * np.sin(a), f"{deg}°",
                 ha="center", va="center", fontsize=8, color="0.3")
     ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
-    counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]  # <= 8 entries
+    # a legend of at most eight entries
+    counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]
     handles = [plt.Rectangle((0, 0), 1, 1, fc=_count_colour(k, present)) for k in counts]
     labels = [f"{k} taut" for k in counts]
     if any(s.width_deg == 0 for s in sectors):

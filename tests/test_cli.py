@@ -46,6 +46,7 @@ def test_bad_out_paths(tmp_path, capsys):
     assert "must end in .png" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_console_script_runs(tmp_path):
     r = subprocess.run([sys.executable, "-m", "tension_zones.cli", "maps", "--wires", "5",
                         "--out", str(tmp_path / "m5.png"), "--quiet"],
@@ -54,6 +55,7 @@ def test_console_script_runs(tmp_path):
     assert "wires" in r.stdout and r.stderr == ""
 
 
+@pytest.mark.slow
 def test_sweep_compliance_adds_the_statics_arrays(tmp_path):
     import numpy as np
 
@@ -122,8 +124,10 @@ print("lazy ok")
 """
 
 
+@pytest.mark.slow
 def test_help_and_import_do_not_import_jax():
-    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300)
+    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300,
+                       check=False)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip().endswith("lazy ok")
 

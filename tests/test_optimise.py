@@ -180,6 +180,7 @@ def _brute_force(sc, step_deg, centre=None, half_width=None):
     return exact[i], A[i]
 
 
+@pytest.mark.slow
 def test_restricted_directions_match_brute_force_and_even_layout_is_infeasible():
     sc = parse_scenario(RESTRICTED)
     even = opt.evaluate_design(sc, tz.Design(3, 20.0, 2.0))
@@ -200,6 +201,7 @@ SMALL = {"n_wires": [3], "pitch_radius_mm": [1.0, 2.5], "wire_stiffness_N_per_mm
          "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
 
 
+@pytest.mark.slow
 def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
     # dp_max ~ L / r and the deflection falls with r and k_w: with no geometric limit and no cost
     # on them the optimum is both upper bounds
@@ -215,6 +217,7 @@ def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
     assert row["pitch_radius_mm"] == pytest.approx(2.0 - 0.2 - 0.15, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_new_numbers_of_the_same_shapes_do_not_recompile():
     opt.optimize(parse_scenario(SMALL), progress=False)
     before = opt._run_starts._cache_size()
@@ -227,6 +230,7 @@ def test_new_numbers_of_the_same_shapes_do_not_recompile():
     assert opt._run_starts._cache_size() == before
 
 
+@pytest.mark.slow
 def test_gradients_agree_with_finite_differences_away_from_switches():
     from tension_zones._numerics import frozen_masks
 
@@ -289,6 +293,7 @@ FULL_CIRCLE = {"theta_L_deg": [30.0, 80.0, 25.0], "delta_deg": [0.0, 360.0, 10.0
                "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
 
 
+@pytest.mark.slow
 def test_four_even_wires_over_a_full_circle_are_feasible_and_reach_the_radius_bound():
     res = opt.optimize(parse_scenario({**FULL_CIRCLE, "n_wires": [4]}), progress=False)
     best = res["best"]
@@ -314,9 +319,6 @@ def test_three_even_wires_stay_infeasible_and_strict_keeps_the_old_rule():
     assert four["zero_width_directions_deg"] == [0.0, 90.0, 180.0, 270.0]
     old = opt._range_spread(tz.Design(4, 20.0, 2.0), opt._task(strict))
     assert int(jnp.sum(old < strict.min_spread)) == four["spread_violations"]
-    assert opt.optimize(parse_scenario({**FULL_CIRCLE, "n_wires": [3, 4], "strict_controllability": True,
-                                        "optimizer": {"starts": 1, "steps": 5}}),
-                        progress=False)["best"] is None
 
 
 def test_zero_width_at_the_ends_of_a_partial_range_and_a_single_direction():

@@ -293,8 +293,8 @@ def test_tension_qp_matches_reference_for_any_layout(angles, rhs, f_min):
 _subsets_qp = jax.jit(jax.vmap(S.min_norm_tensions, in_axes=(None, 0, None)))
 
 
-@settings(max_examples=25, deadline=None)
-@given(n=st.integers(5, 9), even=st.booleans(), seed=st.integers(0, 2**16),
+@settings(max_examples=15, deadline=None)
+@given(n=st.sampled_from([5, 9]), even=st.booleans(), seed=st.integers(0, 2**16),
        f_min=st.sampled_from([0.0, 0.5, 5.0]))
 def test_runs_of_wires_give_the_same_tensions_as_all_subsets(n, even, seed, f_min):
     """The solution's free set is a run of wires consecutive in angle (A = J_qb^T): choosing among
@@ -304,7 +304,7 @@ def test_runs_of_wires_give_the_same_tensions_as_all_subsets(n, even, seed, f_mi
     A = jnp.asarray(-1.6 * np.stack([np.cos(a), np.sin(a)]))
     rhs = jnp.asarray(rng.normal(0.0, 10.0, (64, 2)) * rng.choice([1e-3, 1.0, 10.0], (64, 1)))
     subsets = _subsets_qp(A, rhs, f_min)
-    runs = jax.jit(jax.vmap(lambda r: _runs_qp(A, r, f_min)))(rhs)
+    runs = _runs_qp_jit(A, rhs, f_min)
     np.testing.assert_array_equal(np.asarray(runs.feasible), np.asarray(subsets.feasible))
     ok = np.asarray(subsets.feasible)
     scale = 1.0 + np.abs(np.asarray(subsets.tau)[ok])
@@ -312,13 +312,16 @@ def test_runs_of_wires_give_the_same_tensions_as_all_subsets(n, even, seed, f_mi
 
 
 def _runs_qp(A, rhs, f_min):
-    """min_norm_tensions with the runs of wires whatever the wire count."""
+    """min_norm_tensions with the runs of wires whatever the wire count (set while tracing)."""
     saved = S.MAX_SUBSET_WIRES
     S.MAX_SUBSET_WIRES = 0
     try:
         return S.min_norm_tensions(A, rhs, f_min)
     finally:
         S.MAX_SUBSET_WIRES = saved
+
+
+_runs_qp_jit = jax.jit(jax.vmap(_runs_qp, in_axes=(None, 0, None)))
 
 
 @pytest.mark.parametrize("n, preload", [(16, 0.0), (32, 2.0), (64, 0.0)])

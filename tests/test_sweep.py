@@ -143,6 +143,7 @@ SHARDED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_sharded_over_four_devices_gives_identical_results():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
                PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
@@ -220,6 +221,7 @@ def test_cli_sweep_bad_out_path(tmp_path, capsys):
     assert "must end in .npz" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_cli_sweep_32_wires_within_a_minute(tmp_path):
     """Issue 14: 32 wires compiled for minutes (per-wire unrolling); now the program does not grow
     with the wire count (test_metrics) and the chunk shrinks with it (default_chunk)."""

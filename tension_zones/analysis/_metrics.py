@@ -227,8 +227,9 @@ def _zonogon_vertices_cols(g0, g1):
 
 
 def _zonogon_max_sq(g0, g1, Jx):
-    """``(max |Jx[:3] v|^2, max |Jx[3:] v|^2)`` over the zonogon ``{G x : x in [-1, 1]^n}``, generators
-    ``G = [g0; g1]`` given as (n,) arrays: the many-wire form of :func:`_zonogon_vertices_cols`.
+    """``(max |Jx[:3] v|^2, max |Jx[3:] v|^2)`` over the zonogon ``{G x : x in [-1, 1]^n}``,
+    generators ``G = [g0; g1]`` given as (n,) arrays: the many-wire form of
+    :func:`_zonogon_vertices_cols`.
 
     Each generator is flipped into the upper half-plane (the zonogon does not change); in the order
     of their angles the boundary from ``-sum g`` to ``+sum g`` steps through the partial sums
@@ -243,7 +244,8 @@ def _zonogon_max_sq(g0, g1, Jx):
     # a pseudo-angle, increasing with the angle on [0, pi): no arctangent needed to order them
     key = jax.lax.stop_gradient(jnp.where(den > 0, -h0 / jnp.where(den > 0, den, 1.0), 0.0))
     idx = np.arange(g0.shape[0])
-    upto = (key[None, :] < key[:, None]) | ((key[None, :] == key[:, None]) & (idx[None, :] <= idx[:, None]))
+    same, earlier = key[None, :] == key[:, None], idx[None, :] <= idx[:, None]
+    upto = (key[None, :] < key[:, None]) | (same & earlier)
     v0 = 2.0 * jnp.sum(jnp.where(upto, h0[None, :], 0.0), axis=1) - jnp.sum(h0)
     v1 = 2.0 * jnp.sum(jnp.where(upto, h1[None, :], 0.0), axis=1) - jnp.sum(h1)
     dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
@@ -252,8 +254,9 @@ def _zonogon_max_sq(g0, g1, Jx):
 
 
 def _uncertainty_sq(P0, P1, dq, Jx):
-    """Squared ``(dp_max, dw_max)``: the largest ``|dx[:3]|^2``, ``|dx[3:]|^2`` of ``dx = J_xpsi v`` over
-    the vertices ``v`` of the zonogon ``P dq [-1, 1]^n`` (per-wire rows ``P0``, ``P1`` of ``P``)."""
+    """Squared ``(dp_max, dw_max)``: the largest ``|dx[:3]|^2``, ``|dx[3:]|^2`` of
+    ``dx = J_xpsi v`` over the vertices ``v`` of the zonogon ``P dq [-1, 1]^n`` (per-wire rows
+    ``P0``, ``P1`` of ``P``)."""
     dq = jnp.asarray(dq, Jx.dtype)
     g0, g1 = wmap(lambda x: x * dq, P0), wmap(lambda y: y * dq, P1)
     if not isinstance(g0, list):  # many wires: (n,) arrays
@@ -262,7 +265,8 @@ def _uncertainty_sq(P0, P1, dq, Jx):
     sq = [[0.0, 0.0] for _ in V]  # |dx[:3]|^2, |dx[3:]|^2 per vertex, dx = Jx v
     for i, (v0, v1) in enumerate(V):
         dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
-        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2], dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
+        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2],
+                 dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
     return (functools.reduce(jnp.maximum, [q[0] for q in sq]),
             functools.reduce(jnp.maximum, [q[1] for q in sq]))
 
@@ -331,13 +335,15 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         m = per_wire(mask)
         a, b = wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m)
     blocks = _kept_blocks(Jx, design)
-    return nan_where(_bad_inputs(design, theta_L, delta, dq, mask), _measures(Jx, blocks, a, b, dq, design))
+    out = _measures(Jx, blocks, a, b, dq, design)
+    return nan_where(_bad_inputs(design, theta_L, delta, dq, mask), out)
 
 
 def _bad_inputs(design, theta_L, delta, dq, mask=None):
-    """NaN in, NaN out (:func:`~tension_zones._numerics.nan_where`): a non-finite pose, a ``dq`` that
-    is not a finite non-negative number, a NaN in the mask, or an invalid (traced) design."""
-    bad = design.invalid() | not_finite(theta_L, delta) | ~(jnp.asarray(dq) >= 0) | ~jnp.isfinite(dq)
+    """NaN in, NaN out (:func:`~tension_zones._numerics.nan_where`): a non-finite pose, a ``dq``
+    that is not a finite non-negative number, a NaN in the mask, or an invalid (traced) design."""
+    dq = jnp.asarray(dq)
+    bad = design.invalid() | not_finite(theta_L, delta) | ~(dq >= 0) | ~jnp.isfinite(dq)
     return bad if mask is None else bad | jnp.any(jnp.isnan(mask))
 
 
@@ -346,8 +352,8 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
 
     The keys are those of the ``tension-zones sweep`` file (``kci_v_full``, ``dp_max_reduced``, ...);
     ``n_taut`` is the number of wires in tension (MODEL.md Sec. 2, boundary rule included). The
-    reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN in,
-    NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
+    reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN
+    in, NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
     """
     Jx, a, b, score = _pose_inputs(design, theta_L, delta)  # shared by both modes
     mask = mask_from_score(wstack(score))

@@ -39,8 +39,8 @@ DEFAULT_CHUNK = 1 << 14
 
 def default_chunk(n_wires: int) -> int:
     """Poses per chunk for a wire count: :data:`DEFAULT_CHUNK` up to 8 wires; above, where the
-    measures take (n, n) pair terms per pose, smaller by ``(8 / n)^2`` (a power of two, at least 256),
-    so that the working set stays near its 8-wire size (64 wires at 2^14 poses: 2.6 GB peak)."""
+    measures take (n, n) pair terms per pose, smaller by ``(8 / n)^2`` (a power of two, at least
+    256), so that the working set stays near its 8-wire size (64 wires at 2^14 poses: 2.6 GB)."""
     if n_wires <= 8:
         return DEFAULT_CHUNK
     return max(256, DEFAULT_CHUNK >> (2 * math.ceil(math.log2(n_wires / 8))))

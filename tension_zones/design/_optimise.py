@@ -211,7 +211,8 @@ def _sector_spread(design: Design, task: _Task):
     start = jnp.sort(jnp.mod(zone_boundaries(design), 2 * jnp.pi))
     width = jnp.concatenate([start[1:], start[:1] + 2 * jnp.pi]) - start
     rel = jnp.mod(start - task.delta_lo, 2 * jnp.pi)  # the sector's start, from the range's start
-    overlaps = (rel < task.delta_span - ZERO_WIDTH_RAD) | (rel + width > 2 * jnp.pi + ZERO_WIDTH_RAD)
+    tol = ZERO_WIDTH_RAD
+    overlaps = (rel < task.delta_span - tol) | (rel + width > 2 * jnp.pi + tol)
     at_mid = jax.vmap(lambda d: spread(design, d))(start + 0.5 * width)
     return jnp.where((width > ZERO_WIDTH_RAD) & overlaps, at_mid, jnp.inf)
 
@@ -261,6 +262,10 @@ def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool =
     pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=min_spread,
                   violations=violations, statics_infeasible=jnp.sum(~ok))
     return smooth, exact, pieces
+
+
+#: :func:`_objective`, compiled once per wire count and task shape (not once per call).
+_objective_jit = jax.jit(_objective, static_argnums=(2, 4))
 
 
 def _task(sc: Scenario) -> _Task:
@@ -381,7 +386,7 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
 
 def _evaluate(z, bounds, task, base, n, free, arc, with_defl):
     d = _design(z, bounds, n, free, arc, base)
-    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(d, task, n, 1.0, with_defl)
+    _, exact, pieces = _objective_jit(d, task, n, 1.0, with_defl)
     return d, exact, pieces
 
 
@@ -466,7 +471,7 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
 def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     """The exact objective and its pieces for a given design under a scenario (e.g. to check a
     hand-made design, or the evenly spaced one, against the constraints)."""
-    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(
+    _, exact, pieces = _objective_jit(
         design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
     return _result_row(sc, design.n_wires, design, exact, pieces)
 

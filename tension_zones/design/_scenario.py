@@ -59,9 +59,9 @@ DOC: dict[str, str] = {
                    "outer wall), min_wire_gap_mm (between neighbouring wire holes)",
     "min_spread": "controllability: at every task pose the smallest singular value of the taut wires' "
                   "unit vectors [cos delta_k, sin delta_k] must be at least this (0..1)",
-    "strict_controllability": "false: controllability lost only on single directions (zero width, e.g. "
-                              "exactly along a wire of four even wires) is reported, not a violation; "
-                              "true: every direction counts",
+    "strict_controllability": "false: controllability lost only on single directions (zero "
+                              "width, e.g. exactly along a wire of four even wires) is reported, "
+                              "not a violation; true: every direction counts",
     "forbidden_arc_deg": "null, or [start, end] (deg, counter-clockwise from x_b) of an arc no wire "
                          "may occupy (e.g. a tool channel); needs free_wire_angles",
     "optimizer": "starts (random restarts), steps (Adam steps per start), learning_rate, sharpness "

@@ -135,7 +135,8 @@ class Design:
         ``length``, ``pitch_radius``, ``wire_stiffness`` not finite and positive, ``backbone_EI`` or
         ``preload`` not finite and non-negative, or a wire angle not finite. A boolean scalar (one
         per design of a ``vmap``-ed family); coincident wires are left to the constructor."""
-        pos = [jnp.isfinite(x) & (x > 0) for x in (self.length, self.pitch_radius, self.wire_stiffness)]
+        positive = (self.length, self.pitch_radius, self.wire_stiffness)
+        pos = [jnp.isfinite(x) & (x > 0) for x in positive]
         nonneg = [jnp.isfinite(x) & (x >= 0) for x in (self.backbone_EI, self.preload)]
         ok = functools.reduce(jnp.logical_and, pos + nonneg)
         return ~(ok & jnp.all(jnp.isfinite(self.wire_angles), axis=-1))
@@ -194,11 +195,10 @@ class Design:
         design = cls(**kw)
         missing = missing_physical_keys(d) if warn_missing else []
         if missing:
-            used = {"wire_stiffness_N_per_mm": design.wire_stiffness, "backbone_EI_Nmm2": design.backbone_EI,
-                    "preload_N": design.preload}
-            warnings.warn("design leaves out " + ", ".join(f"{k!r} (default {float(used[k]):g} used)"
-                                                           for k in missing),
-                          MissingDesignKeyWarning, stacklevel=2)
+            used = {"wire_stiffness_N_per_mm": design.wire_stiffness,
+                    "backbone_EI_Nmm2": design.backbone_EI, "preload_N": design.preload}
+            named = ", ".join(f"{k!r} (default {float(used[k]):g} used)" for k in missing)
+            warnings.warn(f"design leaves out {named}", MissingDesignKeyWarning, stacklevel=2)
         return design
 
     @classmethod
@@ -247,7 +247,7 @@ class MissingDesignKeyWarning(UserWarning):
 
 
 def missing_physical_keys(d: dict[str, Any]) -> list[str]:
-    """The keys of :data:`PHYSICAL_KEYS` a design-file dictionary leaves out (they take defaults)."""
+    """The keys of :data:`PHYSICAL_KEYS` a design-file dictionary leaves out (defaults taken)."""
     return [k for k in PHYSICAL_KEYS if k not in d]
 
 

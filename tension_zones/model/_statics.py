@@ -154,23 +154,26 @@ def _choose_free_set(A, rhs, f_min):
 
 def _arc_runs(n: int):
     """Starts and lengths (static, NumPy) of the candidate free sets of :func:`_arc_free_mask`: the
-    empty set, then every run of ``m = 1..n`` wires consecutive in angular order from every start."""
+    empty set, then every run of ``m = 1..n`` wires consecutive in angular order from every
+    start."""
     m, s = np.meshgrid(np.arange(1, n + 1), np.arange(n), indexing="ij")
     return np.concatenate([[0], s.ravel()]), np.concatenate([[0], m.ravel()])
 
 
 def _arc_free_mask(A, rhs, f_min):
-    """The free set of the QP's solution, (n,) 0/1, for many wires: ``O(n^2)`` candidates, not ``2^n``.
+    """The free set of the QP's solution, (n,) 0/1, for many wires: ``O(n^2)`` candidates, not
+    ``2^n``.
 
     A wire is free when ``a_k . lam > f_min``. With ``a_k = rho (cos b_k, sin b_k)`` of one norm
     ``rho`` (``A = J_qb^T``: every wire on the pitch circle), or with ``f_min = 0`` and any norms,
     that is ``cos(phi - b_k) > f_min / (rho |lam|)`` for ``lam = |lam| (cos phi, sin phi)``: the
     wires within an open arc of less than 180 deg centred on ``phi``. So the solution's free set is
     empty or a run of wires consecutive in the order of their angles ``b_k``, spanning less than
-    180 deg: ``n^2 + 1`` candidates. A run is the solution's set exactly when its ``lam`` puts its two
-    end wires above ``f_min`` and the two wires just outside it at or below (the free set of any
-    ``lam`` is such an arc) and reaches ``rhs``: four wires checked per candidate, against every wire
-    for the 2^n subsets of :func:`_choose_free_set`. Everything but ``lam`` and that check depends on
+    180 deg: ``n^2 + 1`` candidates. A run is the solution's set exactly when its ``lam`` puts its
+    two end wires above ``f_min`` and the two wires just outside it at or below (the free set of
+    any ``lam`` is such an arc) and reaches ``rhs``: four wires checked per candidate, against
+    every wire for the 2^n subsets of :func:`_choose_free_set`. Everything but ``lam`` and that
+    check depends on
     ``A`` and ``f_min`` alone (shared by all poses under ``vmap``). No gradient. For ``A`` with
     unequal column norms and ``f_min > 0`` the solution's set need not be a run: such poses come out
     flagged infeasible, never wrong (``min_norm_tensions`` checks the KKT conditions).
@@ -220,7 +223,8 @@ def _arc_free_mask(A, rhs, f_min):
             + jnp.abs(g01 * lam0 + g11 * lam1 + c1 - rhs[1])) * inv_norm_A
     viol = jnp.where(runs | (length == 0), wrong + miss, jnp.inf)
     best = jnp.argmin(viol)  # the first of least violation
-    member = (np.arange(n) - jnp.asarray(start)[best]) % n < jnp.asarray(length)[best]  # sorted order
+    # the chosen run's wires, in angular order
+    member = (np.arange(n) - jnp.asarray(start)[best]) % n < jnp.asarray(length)[best]
     return jnp.zeros(n, A.dtype).at[order].set(member.astype(A.dtype))  # back to the wires' order
 
 
@@ -250,10 +254,12 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
         free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
     fr, a0, a1 = per_wire(free), per_wire(A[0]), per_wire(A[1])
     P0, P1 = pinv_tall2_cols(wmap(lambda x, f: x * f, a0, fr), wmap(lambda x, f: x * f, a1, fr))
-    r = [rhs[i] - f_min * wsum(wmap(lambda x, f: x * (1.0 - f), ai, fr)) for i, ai in enumerate((a0, a1))]
+    r = [rhs[i] - f_min * wsum(wmap(lambda x, f: x * (1.0 - f), ai, fr))
+         for i, ai in enumerate((a0, a1))]
     t = wmap(lambda p0, p1: p0 * r[0] + p1 * r[1], P0, P1)  # pinv(A_S)^T r: the free tensions
     tau = wstack(wmap(lambda tk, f: tk + f_min * (1.0 - f), t, fr))
-    lam = jnp.stack([wsum(wmap(lambda p, tk: p * tk, P0, t)), wsum(wmap(lambda p, tk: p * tk, P1, t))])
+    lam = jnp.stack([wsum(wmap(lambda p, tk: p * tk, P0, t)),
+                     wsum(wmap(lambda p, tk: p * tk, P1, t))])
     res = kkt_residual(A, rhs, f_min, tau, lam)
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
@@ -268,7 +274,8 @@ def kkt_residual(A, rhs, f_min, tau, lam):
     """
     a0, a1, tk = per_wire(A[0]), per_wire(A[1]), per_wire(tau)
     norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
-    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i] for i, ai in enumerate((a0, a1))])
+    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i]
+                    for i, ai in enumerate((a0, a1))])
     station = wmax(wmap(lambda t, x, y: jnp.abs(t - jnp.maximum(f_min, x * lam[0] + y * lam[1])),
                         tk, a0, a1))
     max_tau = wmax(wmap(jnp.abs, tk))

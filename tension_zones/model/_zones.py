@@ -62,7 +62,7 @@ def tension_mask(design: Design, delta, theta_L=None, psi_dot=None, temperature=
 
 
 def mask_from_score(score, temperature=TEMPERATURE):
-    """:func:`tension_mask` from a :func:`tension_score` the caller already has (NaN where it is)."""
+    """:func:`tension_mask` from a :func:`tension_score` the caller has (NaN where it is NaN)."""
     mask = straight_through(score > BOUNDARY_TOL, jax.nn.sigmoid(score / temperature))
     return jnp.where(jnp.isnan(score), jnp.nan, mask)
 
