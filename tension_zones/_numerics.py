@@ -320,8 +320,9 @@ def gram_pinv_cols(a, b):
     det = cauchy_binet(a, b)
     tr = g00 + g11
     rcond = max(n, 2) * eps_of(g00)
-    rank2 = det > (rcond * tr) ** 2
-    rank_pos = tr > 0
+    # ~(x <= y) rather than x > y: the same for numbers, and NaN goes through (never a plausible 0)
+    rank2 = ~(det <= (rcond * tr) ** 2)
+    rank_pos = ~(tr <= 0)
     det_safe = jnp.where(rank2, det, 1.0)
     tr_safe = jnp.where(rank_pos, tr, 1.0)
 

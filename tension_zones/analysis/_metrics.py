@@ -25,8 +25,6 @@ from .._numerics import (
     eps_of,
     gram_pinv_cols,
     keep,
-    nan_where,
-    not_finite,
     per_wire,
     pinv_rows,
     unrolled,
@@ -52,8 +50,9 @@ MODES = ("full", "reduced")
 # Guarded elementary functions (double-where: finite values *and* gradients at 0)
 # --------------------------------------------------------------------------------------------
 def _sqrt0(x):
-    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0."""
-    pos = x > 0
+    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0; NaN for NaN (``~(x <= 0)``, not
+    ``x > 0``: the same for numbers, and a NaN stays NaN instead of becoming a plausible 0)."""
+    pos = ~(x <= 0)
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
@@ -131,7 +130,15 @@ def zonogon_vertices(G):
     return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
 
 
-def _pose_inputs(design: Design, theta_L, delta):
+def _radius_or_nan(design: Design, dq):
+    """The pitch radius, or NaN for an invalid (traced) design or a non-finite ``dq``: once per
+    design, and every measure depends on it through ``P = pinv(J~_qpsi)``, so NaN in is NaN out at
+    no cost per pose (NaN poses and masks propagate by themselves: every guard here lets a NaN
+    through)."""
+    return jnp.where(design.invalid(), jnp.nan, design.pitch_radius) + 0.0 * jnp.asarray(dq)
+
+
+def _pose_inputs(design: Design, theta_L, delta, dq):
     """What every measure of one pose needs, computed once: ``J_xpsi`` (6, 2), the columns ``a``, ``b``
     of ``J_qpsi`` and the tension scores ``cos(delta_k)`` (per-wire values: lists of n scalars, or
     (n,) arrays above :data:`~tension_zones._numerics.UNROLL_MAX_WIRES` wires).
@@ -158,7 +165,7 @@ def _pose_inputs(design: Design, theta_L, delta):
     else:
         kept = keep(list(terms) + [cos_k, sin_k], design.length)
         terms, (cos_k, sin_k) = kept[:8], kept[8:]
-    T, r = terms[0], design.pitch_radius
+    T, r = terms[0], _radius_or_nan(design, dq)
     a = wmap(lambda c: r * c, cos_k)
     b = wmap(lambda s: -r * T * s, sin_k)
     return J_xpsi_from_terms(design.length, terms), a, b, cos_k
@@ -317,8 +324,8 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         dq: joint-level uncertainty bound (mm), scalar; the box is ``dq [-1, 1]^n`` (paper Eq. 17).
         mask: ``None`` (traditional, all wires) or (n,) 0/1 taut mask (reduced, paper Sec. 3.3).
 
-    Returns a dict of scalars (the keys of :data:`MEASURES`), every one NaN for NaN (or infinite)
-    inputs, a negative ``dq``, a NaN mask or an invalid design (:meth:`Design.invalid`):
+    Returns a dict of scalars (the keys of :data:`MEASURES`), every one NaN for a NaN (or
+    infinite) pose, ``dq`` or mask entry, or an invalid design (:meth:`Design.invalid`):
         ``kci_v``, ``kci_w``: ``sigma_2 / sigma_1`` of ``J_v = J_xq[:3]`` and ``J_w = J_xq[3:]``
         (0 when the rank is below 2); ``sigma_min_v`` (mm/mm), ``sigma_min_w`` (rad/mm):
         ``sigma_2``; ``sigma_min_nz_v``, ``sigma_min_nz_w``: the smallest *non-zero* singular value
@@ -326,7 +333,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         ``dp_max`` (mm), ``dw_max`` (rad): the largest ``||dx[:3]||`` and ``||dx[3:]||`` with
         ``dx = J_xpsi pinv(J~_qpsi) dq_vec`` over the box (paper Eqs. 17-19), exact.
     """
-    Jx, a, b, _ = _pose_inputs(design, theta_L, delta)
+    Jx, a, b, _ = _pose_inputs(design, theta_L, delta, dq)
     if mask is not None:
         mask = jnp.asarray(mask, Jx.dtype)
         if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
@@ -335,16 +342,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         m = per_wire(mask)
         a, b = wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m)
     blocks = _kept_blocks(Jx, design)
-    out = _measures(Jx, blocks, a, b, dq, design)
-    return nan_where(_bad_inputs(design, theta_L, delta, dq, mask), out)
-
-
-def _bad_inputs(design, theta_L, delta, dq, mask=None):
-    """NaN in, NaN out (:func:`~tension_zones._numerics.nan_where`): a non-finite pose, a ``dq``
-    that is not a finite non-negative number, a NaN in the mask, or an invalid (traced) design."""
-    dq = jnp.asarray(dq)
-    bad = design.invalid() | not_finite(theta_L, delta) | ~(dq >= 0) | ~jnp.isfinite(dq)
-    return bad if mask is None else bad | jnp.any(jnp.isnan(mask))
+    return _measures(Jx, blocks, a, b, dq, design)
 
 
 def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
@@ -355,13 +353,14 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN
     in, NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
     """
-    Jx, a, b, score = _pose_inputs(design, theta_L, delta)  # shared by both modes
+    Jx, a, b, score = _pose_inputs(design, theta_L, delta, dq)  # shared by both modes
     mask = mask_from_score(wstack(score))
-    out = {"n_taut": jnp.sum(mask > 0.5).astype(jnp.int32)}
+    bad = ~jnp.isfinite(theta_L + delta + _radius_or_nan(design, dq))  # cheap: no measure in it
+    out = {"n_taut": jnp.where(bad, -1, jnp.sum(mask > 0.5)).astype(jnp.int32)}
     blocks = _kept_blocks(Jx, design)
     m = per_wire(mask)
     reduced = (wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m))
     for mode, (aa, bb) in (("full", (a, b)), ("reduced", reduced)):
         for k, v in _measures(Jx, blocks, aa, bb, dq, design).items():
             out[f"{k}_{mode}"] = v
-    return nan_where(_bad_inputs(design, theta_L, delta, dq), out)
+    return out
