@@ -1,4 +1,4 @@
-"""Speed and scale, measured side by side in one run (issue 7).
+"""Speed and scale, measured side by side in one run.
 
     python benchmarks/run.py [--quick] [--json OUT.json] [--no-readme]
 
@@ -338,7 +338,7 @@ def bench_optimiser(quick):
 
 
 # ------------------------------------------------------------------------------------------------
-# Design-space exploration (issue 16)
+# Design-space exploration
 # ------------------------------------------------------------------------------------------------
 def _explore_space(n_designs, loaded):
     """4 wires; pitch radius, length, wire stiffness and each wire's angle offset varied; a Halton

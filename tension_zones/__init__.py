@@ -1,146 +1,61 @@
 """tension-zones: pull-only (tendon) actuation analysis for continuum robots, in JAX.
 
-Importing the package enables float64 in JAX (see :mod:`tension_zones._config`).
+Importing the package enables float64 in JAX (see :mod:`tension_zones._config`), but imports nothing
+heavy: every public name below is loaded from its sub-package on first use (PEP 562), so
+``tension-zones --help`` and ``import tension_zones`` do not pay for importing JAX.
+``import tension_zones as tz; tz.Design(...)`` works as before.
 """
 
-from . import _config  # noqa: F401  (must run before any array is made)
-from .model import DEFAULT_BACKBONE_EI, DEFAULT_WIRE_STIFFNESS, Design
-from .model import (
-    THETA_0,
-    J_qb,
-    J_qpsi,
-    J_xb,
-    J_xpsi,
-    J_xq,
-    b_to_psi,
-    jacobians,
-    over_grid,
-    psi_to_b,
-    tip_pose,
-    tip_pose_b,
-    wire_lengths,
-    wire_lengths_b,
-)
-from .design import evaluate_design, optimize, spread
-from .design import Scenario, load_scenario, parse_scenario
-from .analysis import DEFAULT_DQ, pose_measures, pose_metrics, zonogon_vertices
-from .analysis import grid_deg, sweep_grid, sweep_poses
-from .analysis import sweep_designs  # issue 16
-from .design import Space, explore, explore_designs, load_space, parse_space, pareto_front  # issue 16
-from .model import (
-    PAPER_DELTA_DEG,
-    PAPER_THETA_L_DEG,
-    PAPER_WRENCH,
-    TensionSolution,
-    compliance,
-    compliance_grid,
-    compliance_pose,
-    compliance_pose_jit,
-    min_norm_tensions,
-    stiffness_b,
-    stiffness_psi,
-    taut_mask,
-    tensions,
-)
-from .model import (
-    BOUNDARY_TOL,
-    TEMPERATURE,
-    Sector,
-    TensionMap,
-    reduced_J_qpsi,
-    reduced_J_xq,
-    tension_map,
-    tension_mask,
-    tension_score,
-)
+import importlib
+import os
+import sys
 
-from .calibration import (  # noqa: E402
-    DataError,
-    Dataset,
-    calibrate,
-    load_data,
-    read_csv,
-    read_opencr,
-    write_report,
-)
-from .model import Load, Robot, equilibrium, forward  # noqa: E402
-from ._examples import copy_examples, example_path, list_examples  # noqa: E402
+# float64 before any array is made: if JAX is not imported yet, its own switch (read when JAX is
+# imported) is set here without importing it; if it is, the flag is set now (cheap: JAX is loaded).
+# TENSION_ZONES_X64=0 leaves JAX's setting alone (see _config).
+if "jax" in sys.modules:
+    from . import _config  # noqa: F401
+elif os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
+    os.environ.setdefault("JAX_ENABLE_X64", "1")
 
 __version__ = "0.1.0"
 
-__all__ = [
-    "BOUNDARY_TOL",
-    "DataError",
-    "Dataset",
-    "calibrate",
-    "copy_examples",
-    "example_path",
-    "list_examples",
-    "equilibrium",
-    "forward",
-    "Load",
-    "Robot",
-    "read_csv",
-    "read_opencr",
-    "load_data",
-    "write_report",
-    "DEFAULT_BACKBONE_EI",
-    "DEFAULT_DQ",
-    "DEFAULT_WIRE_STIFFNESS",
-    "Design",
-    "J_qb",
-    "J_qpsi",
-    "J_xb",
-    "J_xpsi",
-    "J_xq",
-    "PAPER_DELTA_DEG",
-    "PAPER_THETA_L_DEG",
-    "PAPER_WRENCH",
-    "Sector",
-    "TEMPERATURE",
-    "THETA_0",
-    "TensionMap",
-    "TensionSolution",
-    "b_to_psi",
-    "grid_deg",
-    "compliance",
-    "evaluate_design",
-    "load_scenario",
-    "optimize",
-    "parse_scenario",
-    "Scenario",
-    "spread",
-    "compliance_grid",
-    "compliance_pose",
-    "compliance_pose_jit",
-    "jacobians",
-    "min_norm_tensions",
-    "over_grid",
-    "pose_measures",
-    "pose_metrics",
-    "psi_to_b",
-    "reduced_J_qpsi",
-    "reduced_J_xq",
-    "sweep_grid",
-    "sweep_poses",
-    "stiffness_b",
-    "stiffness_psi",
-    "taut_mask",
-    "tension_map",
-    "tension_mask",
-    "tension_score",
-    "tensions",
-    "tip_pose",
-    "tip_pose_b",
-    "wire_lengths",
-    "wire_lengths_b",
-    "zonogon_vertices",
-    # issue 16: design-space exploration
-    "Space",
-    "explore",
-    "explore_designs",
-    "load_space",
-    "parse_space",
-    "pareto_front",
-    "sweep_designs",
-]
+#: Public name -> the sub-package that defines it (one place per concept; loaded on first use).
+_WHERE = {
+    **dict.fromkeys((
+        "DEFAULT_BACKBONE_EI", "DEFAULT_WIRE_STIFFNESS", "Design", "THETA_0", "J_qb", "J_qpsi",
+        "J_xb", "J_xpsi", "J_xq", "b_to_psi", "jacobians", "over_grid", "psi_to_b", "tip_pose",
+        "tip_pose_b", "wire_lengths", "wire_lengths_b", "PAPER_DELTA_DEG", "PAPER_THETA_L_DEG",
+        "PAPER_WRENCH", "TensionSolution", "compliance", "compliance_grid", "compliance_pose",
+        "compliance_pose_jit", "min_norm_tensions", "stiffness_b", "stiffness_psi", "taut_mask",
+        "tensions", "BOUNDARY_TOL", "TEMPERATURE", "Sector", "TensionMap", "reduced_J_qpsi",
+        "reduced_J_xq", "tension_map", "tension_mask", "tension_score"), "model"),
+    **dict.fromkeys(("evaluate_design", "optimize", "spread", "Scenario", "load_scenario",
+                     "parse_scenario"), "design"),
+    **dict.fromkeys(("DEFAULT_DQ", "pose_measures", "pose_metrics", "zonogon_vertices", "grid_deg",
+                     "sweep_grid", "sweep_poses"), "analysis"),
+    **dict.fromkeys(("Load", "Robot", "equilibrium", "forward"), "model"),
+    **dict.fromkeys(("sweep_designs",), "analysis"),
+    **dict.fromkeys(("Space", "explore", "explore_designs", "load_space", "parse_space", "pareto_front"),
+                    "design"),
+    **dict.fromkeys(("DataError", "Dataset", "calibrate", "load_data", "read_csv", "read_opencr",
+                     "write_report"), "calibration"),
+    **dict.fromkeys(("copy_examples", "example_path", "list_examples"), "_examples"),
+}
+_SUBPACKAGES = ("model", "analysis", "design", "paper", "calibration", "cli", "plots")
+
+__all__ = list(_WHERE)
+
+
+def __getattr__(name):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value  # the next look-up is a plain attribute
+        return value
+    if name in _SUBPACKAGES:
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -3,6 +3,11 @@
 Importing :mod:`tension_zones` turns on ``jax_enable_x64`` (analysis wants float64: pinv, small
 singular values and 1e-9 agreement need it). Set ``TENSION_ZONES_X64=0`` in the environment before
 importing to leave JAX's setting alone; float32 designs (``Design.astype(jnp.float32)``) work either way.
+
+The package itself does not import JAX (``tension_zones/__init__.py`` is lazy): if JAX is not loaded
+yet it sets JAX's own switch ``JAX_ENABLE_X64=1`` in the environment (unless already set), which JAX
+reads when it is imported (child processes inherit it); this module, imported by every sub-package
+that uses JAX, sets the flag directly in case JAX was imported first.
 """
 
 import os

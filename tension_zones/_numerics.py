@@ -12,10 +12,14 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 
 import jax
 import jax.numpy as jnp
+import numpy as np
+
+from . import _config  # noqa: F401  (float64 before any array is made)
 
 
 def float_dtype(*xs):
@@ -182,6 +186,30 @@ def straight_through(hard, soft):
     return _hard_value_soft_tangent(hard, soft)
 
 
+def nan_where(bad, out):
+    """NaN in, NaN out: every floating leaf of ``out`` (a dict or other pytree) NaN where ``bad``;
+    integer leaves (counts) ``-1`` and boolean leaves (flags) ``False`` there.
+
+    The measures guard their square roots and divisions (double ``where``), which would otherwise
+    turn a NaN input into a plausible 0; this one select at the end restores it. ``bad`` is a scalar
+    (a pose's inputs or the design's values); finite inputs keep their values and gradients.
+    """
+    def one(x):
+        x = jnp.asarray(x)
+        if jnp.issubdtype(x.dtype, jnp.inexact):
+            return jnp.where(bad, jnp.nan, x)
+        return jnp.where(bad, False if x.dtype == jnp.bool_ else -1, x).astype(x.dtype)
+
+    if isinstance(out, dict):  # keep the keys' order (tree_map would sort them)
+        return {k: nan_where(bad, v) for k, v in out.items()}
+    return jax.tree_util.tree_map(one, out)
+
+
+def not_finite(*xs):
+    """True where any of the arrays has a NaN or an infinite entry (a scalar)."""
+    return functools.reduce(jnp.logical_or, [~jnp.all(jnp.isfinite(jnp.asarray(x))) for x in xs])
+
+
 def skew(w):
     """(3,) -> (3, 3) cross-product matrix."""
     z = jnp.zeros_like(w[0])
@@ -200,6 +228,63 @@ def rotvec_to_matrix(w):
     return jnp.eye(3, dtype=K.dtype) + sinc_sq(t2) * K + versinc_sq(t2) * (K @ K)
 
 
+# --------------------------------------------------------------------------------------------
+# Per-wire values: a list of n per-pose scalars (few wires) or an (n,) array (many)
+# --------------------------------------------------------------------------------------------
+#: Up to this many wires, per-wire work is written on lists of per-pose scalars, unrolled: vmapped
+#: they are plain (N,) arrays that XLA:CPU fuses, the fastest to run (benchmarks/README.md). Above
+#: it, on (n,) arrays: the unrolled program grows with n (pair terms with n^2) and so does its
+#: compile time (67 s for the kinematic measures at 24 wires); the array program does not.
+UNROLL_MAX_WIRES = 8
+
+
+def unrolled(n: int) -> bool:
+    """Whether ``n`` wires are handled as a list of scalars (else as an array)."""
+    return n <= UNROLL_MAX_WIRES
+
+
+def _is_list(xs) -> bool:
+    return isinstance(xs, (list, tuple))
+
+
+def per_wire(x):
+    """An (n,) array in the per-wire form for its wire count: a list of its n entries or itself."""
+    return [x[k] for k in range(x.shape[0])] if unrolled(x.shape[0]) else x
+
+
+def wmap(f, *xss):
+    """``f`` applied wire by wire (elementwise) to per-wire values of one form."""
+    return [f(*t) for t in zip(*xss)] if _is_list(xss[0]) else f(*xss)
+
+
+def wsum(xs):
+    """Sum over the wires (a list is summed left to right, as Python's ``sum``)."""
+    return sum(xs) if _is_list(xs) else jnp.sum(xs, axis=0)
+
+
+def wmax(xs):
+    """Maximum over the wires."""
+    return functools.reduce(jnp.maximum, xs) if _is_list(xs) else jnp.max(xs, axis=0)
+
+
+def wstack(xs):
+    """Per-wire values as an (n,) array."""
+    return jnp.stack(xs) if _is_list(xs) else xs
+
+
+def cauchy_binet(a, b):
+    """``sum_{i<j} (a_i b_j - b_i a_j)^2``: the determinant of ``J^T J`` for ``J = [a b]`` (n, 2)
+    given by its columns (per-wire values). Exactly 0 when at most one row is non-zero, and accurate
+    when small. Pairs only (the diagonal is left out: under FMA it need not be exactly 0). Arrays:
+    the (n, n) pair terms in one reduction, which XLA fuses (nothing of size n^2 is stored)."""
+    if _is_list(a):
+        n = len(a)
+        return sum((a[i] * b[j] - b[i] * a[j]) ** 2 for i in range(n) for j in range(i + 1, n))
+    C = a[:, None] * b[None, :] - b[:, None] * a[None, :]
+    upper = np.triu(np.ones((a.shape[0],) * 2, bool), 1)
+    return jnp.sum(jnp.where(upper, C * C, 0.0), axis=(0, 1))
+
+
 def pinv_tall2(J):
     """Moore-Penrose pseudo-inverse of an ``(n, 2)`` matrix, ``(2, n)``.
 
@@ -209,16 +294,16 @@ def pinv_tall2(J):
     NumPy's default ``rcond = max(n, 2) * eps`` on singular values; rank 1 uses
     ``pinv(G) = G / tr(G)^2``; rank 0 gives zeros. Both branches are guarded (double ``where``).
     """
-    n = J.shape[0]
-    r0, r1 = pinv_tall2_cols([J[k, 0] for k in range(n)], [J[k, 1] for k in range(n)])
-    return jnp.stack([jnp.stack(r0), jnp.stack(r1)])
+    r0, r1 = pinv_tall2_cols(per_wire(J[:, 0]), per_wire(J[:, 1]))
+    return jnp.stack([wstack(r0), wstack(r1)])
 
 
 def pinv_tall2_cols(a, b):
     """The pseudo-inverse of :func:`pinv_tall2` (its one implementation), the matrix given by its two
-    columns ``a``, ``b`` as lists of ``n`` scalars.
+    columns ``a``, ``b`` as per-wire values (lists of ``n`` scalars, or (n,) arrays above
+    :data:`UNROLL_MAX_WIRES`).
 
-    Returns the rows of the (2, n) pseudo-inverse as two lists. Written elementwise:
+    Returns the rows of the (2, n) pseudo-inverse in the same form. Lists are written elementwise:
     vmapped over poses these are plain (N,) arrays that XLA fuses, where the matrix form becomes
     tiny batched matmuls and ``triu_indices`` gathers.
     """
@@ -228,15 +313,16 @@ def pinv_tall2_cols(a, b):
 def gram_pinv_cols(a, b):
     """``(i00, i01, i11)``: the entries of ``pinv(G)``, ``G = J^T J``, for the matrix ``J`` (n, 2) given
     by its columns (see :func:`pinv_tall2`); ``pinv(J) = pinv(G) J^T`` (:func:`pinv_rows`)."""
-    n = len(a)
-    g00 = sum(x * x for x in a)
-    g01 = sum(x * y for x, y in zip(a, b))
-    g11 = sum(y * y for y in b)
-    det = sum((a[i] * b[j] - b[i] * a[j]) ** 2 for i in range(n) for j in range(i + 1, n))
+    n = len(a) if _is_list(a) else a.shape[0]
+    g00 = wsum(wmap(lambda x: x * x, a))
+    g01 = wsum(wmap(lambda x, y: x * y, a, b))
+    g11 = wsum(wmap(lambda y: y * y, b))
+    det = cauchy_binet(a, b)
     tr = g00 + g11
-    rcond = max(n, 2) * eps_of(a[0])
-    rank2 = det > (rcond * tr) ** 2
-    rank_pos = tr > 0
+    rcond = max(n, 2) * eps_of(g00)
+    # ~(x <= y) rather than x > y: the same for numbers, and NaN goes through (never a plausible 0)
+    rank2 = ~(det <= (rcond * tr) ** 2)
+    rank_pos = ~(tr <= 0)
     det_safe = jnp.where(rank2, det, 1.0)
     tr_safe = jnp.where(rank_pos, tr, 1.0)
 
@@ -247,6 +333,6 @@ def gram_pinv_cols(a, b):
 
 
 def pinv_rows(gram_pinv, a, b):
-    """The rows of ``pinv(J) = pinv(G) J^T`` (two lists of n) from :func:`gram_pinv_cols`."""
+    """The rows of ``pinv(J) = pinv(G) J^T`` (per-wire values) from :func:`gram_pinv_cols`."""
     i00, i01, i11 = gram_pinv
-    return [i00 * x + i01 * y for x, y in zip(a, b)], [i01 * x + i11 * y for x, y in zip(a, b)]
+    return wmap(lambda x, y: i00 * x + i01 * y, a, b), wmap(lambda x, y: i01 * x + i11 * y, a, b)

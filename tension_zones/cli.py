@@ -6,17 +6,41 @@ Errors are one line on stderr (``tension-zones: error: ...``) and exit status 2,
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
+
+# Only the standard library and NumPy at import: `tension-zones --help` and `CMD --help` never
+# import JAX (each command imports what it needs when it runs).
 
 
 class CLIError(Exception):
     """A user-facing error: printed as one line."""
 
 
+#: The largest wire count the command line takes (the library takes any): the measures cost n^2 per
+#: pose above 8 wires, so 256 wires sweep the default grid in seconds and far more would not.
+MAX_WIRES = 256
+#: The largest sweep grid the command line takes: 10^7 poses hold 1.4 GB of kinematic results.
+MAX_SWEEP_POSES = 20_000_000
+#: Design fields -> the flags that set them (a design error names the flag).
+_FLAG_OF_FIELD = {"n_wires": "--wires", "length": "--length", "pitch_radius": "--pitch-radius",
+                  "wire_angles": "--angles", "wire_angles_deg": "--angles",
+                  "wire_stiffness": "--wire-stiffness", "backbone_EI": "--backbone-EI",
+                  "preload": "--preload"}
+
+
+def _design_error(e: ValueError) -> CLIError:
+    """A design's one-line ValueError, prefixed with the flag of the field it names."""
+    flag = _FLAG_OF_FIELD.get(str(e).split(" ", 1)[0])
+    return CLIError(f"{flag}: {e}" if flag else str(e))
+
+
 def _parse_angles(text: str | None, n_wires: int | None):
+    """``--angles`` in degrees (a list), checked for count and finiteness."""
     if text is None:
         return None
     try:
@@ -25,42 +49,96 @@ def _parse_angles(text: str | None, n_wires: int | None):
         raise CLIError(f"--angles must be comma-separated numbers in degrees, got {text!r}") from None
     if n_wires is not None and len(vals) != n_wires:
         raise CLIError(f"--angles has {len(vals)} values but --wires is {n_wires}")
-    return np.radians(vals)
+    if not np.all(np.isfinite(vals)):
+        raise CLIError(f"--angles must be finite numbers in degrees, got {text!r}")
+    return vals
 
 
 def _design(args, length=20.0, pitch_radius=2.0):
-    from .model._design import Design
+    from .model._design import Design, _check_angles
 
-    d = {"n_wires": args.wires, "length_mm": length, "pitch_radius_mm": pitch_radius}
-    if getattr(args, "angles", None) is not None:
-        d["wire_angles_deg"] = np.degrees(_parse_angles(args.angles, args.wires)).tolist()
+    if args.wires > MAX_WIRES:
+        raise CLIError(f"--wires must be at most {MAX_WIRES} on the command line, got {args.wires} "
+                       "(tension_zones.Design takes any count)")
+    angles = _parse_angles(getattr(args, "angles", None), args.wires)
     try:
-        return Design.from_dict(d)
+        if angles is not None:
+            _check_angles(angles, args.wires, field="wire_angles_deg")  # its message in degrees
+        return Design(args.wires, length, pitch_radius,
+                      wire_angles=None if angles is None else np.radians(angles))
     except ValueError as e:
-        raise CLIError(str(e)) from None
+        raise _design_error(e) from None
 
 
-def _out_path(path: str, suffix: str) -> Path:
+# ---- output paths: checked before any computation, never overwritten without --force -----------
+def _probe_writable(folder: Path, flag: str) -> None:
+    """Create and remove a file in ``folder``: the one test that also catches read-only file systems
+    and permissions that ``os.access`` misreports."""
+    try:
+        fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tension-zones-probe-")
+    except OSError as e:
+        raise CLIError(f"{flag}: cannot write in the folder {str(folder)!r} "
+                       f"({e.strerror or type(e).__name__})") from None
+    os.close(fd)
+    os.unlink(tmp)
+
+
+def _check_out_file(path: str, suffix: str, force: bool = False, flag: str = "--out") -> Path:
+    """An output file ``path``: ends in ``suffix``, is not a folder, its folder exists and is
+    writable, and it does not exist yet unless ``force``. Returns it as a ``Path``."""
     p = Path(path)
     if p.suffix.lower() != suffix:
-        raise CLIError(f"--out must end in {suffix}, got {path!r}")
+        raise CLIError(f"{flag} must end in {suffix}, got {path!r}")
+    if p.is_dir():
+        raise CLIError(f"{flag} must be a file, {path!r} is a folder")
     if not p.parent.exists():
-        raise CLIError(f"the folder of --out does not exist: {str(p.parent)!r}")
+        raise CLIError(f"the folder of {flag} does not exist: {str(p.parent)!r}")
+    if not p.parent.is_dir():
+        raise CLIError(f"the folder of {flag} is a file: {str(p.parent)!r}")
+    if p.exists() and not force:
+        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another "
+                       "name")
+    _probe_writable(p.parent, flag)
     return p
 
 
+def _check_out_dir(path: str, force: bool = False, names=None, flag: str = "--out") -> Path:
+    """An output folder ``path``: not a file; it exists and is writable, or its parent does (it is
+    created when the results are written). Without ``force`` it may not already hold any of
+    ``names`` (the files the command writes), or anything at all when ``names`` is None."""
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"{flag} must be a folder, {path!r} is a file")
+    if out.is_dir():
+        held = (sorted(n for n in names if (out / n).exists()) if names is not None
+                else sorted(p.name for p in out.iterdir()))
+        if held and not force:
+            more = f" and {len(held) - 1} more" if len(held) > 1 else ""
+            raise CLIError(f"{flag} {path!r} already holds {held[0]!r}{more}; pass --force to "
+                           "overwrite, or choose another folder")
+        _probe_writable(out, flag)
+    else:
+        if not out.parent.is_dir():
+            raise CLIError(f"the folder of {flag} does not exist: {str(out.parent)!r}")
+        _probe_writable(out.parent, flag)
+    return out
+
+
 def cmd_maps(args) -> None:
+    out = _check_out_file(args.out, ".png", args.force)
+    design = _design(args)
+
     import matplotlib.pyplot as plt
 
-    from .plots import plot_tension_map
+    from ._io import atomic_path
     from .model._zones import tension_map
+    from .plots import plot_tension_map
 
-    out = _out_path(args.out, ".png")
-    design = _design(args)
     tmap = tension_map(design)
     fig, ax = plt.subplots(figsize=(6.4, 6.8))
     plot_tension_map(tmap, ax=ax)
-    fig.savefig(out, dpi=130, bbox_inches="tight")
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=130, bbox_inches="tight")
     plt.close(fig)
     print(tmap.table())
     if not args.quiet:
@@ -68,23 +146,22 @@ def cmd_maps(args) -> None:
 
 
 def cmd_reproduce(args) -> None:
+    out = _check_out_dir(args.out, args.force)
     from .paper._reproduce import reproduce
 
-    reproduce(Path(args.out), quiet=args.quiet)
+    reproduce(out, quiet=args.quiet)
 
 
-# --- optimize (issue 5) -----------------------------------------------------------------------
+# --- optimize -----------------------------------------------------------------------
 def cmd_optimize(args) -> None:
-    from .design._optimise import optimize, write_outputs
+    from .design._optimise import OUTPUT_FILES, optimize, write_outputs
     from .design._scenario import load_scenario
 
     try:
         sc = load_scenario(args.scenario)
     except ValueError as e:
         raise CLIError(str(e)) from None
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out must be a folder, got the file {args.out!r}")
+    out = _check_out_dir(args.out, args.force, OUTPUT_FILES)
     result = optimize(sc, progress=not args.quiet)
     paths = write_outputs(result, out)
     best = result["best"]
@@ -99,7 +176,7 @@ def cmd_optimize(args) -> None:
         for p in paths:
             print(f"wrote {p}")
 
-# ---- sweep (issue 3): workspace performance maps ------------------------------------------------
+# ---- sweep: workspace performance maps ------------------------------------------------
 def _kinematics_measure(args):
     """MODEL.md Sec. 3 measures, full and reduced: ``(per-pose function, extra args)``."""
     from .analysis._metrics import pose_metrics
@@ -129,7 +206,7 @@ def _load_arg(text: str) -> np.ndarray:
 
 
 def _with_compliance(args):
-    """Kinematic measures plus the tension-only statics (issue 4) in one per-pose function."""
+    """Kinematic measures plus the tension-only statics in one per-pose function."""
     from .analysis._metrics import pose_metrics
     from .model._statics import as_wrench, compliance_pose
 
@@ -142,10 +219,10 @@ def _with_compliance(args):
 
 
 def cmd_sweep(args) -> None:
+    from .analysis._sweep import grid_deg, grid_size, sweep_grid
     from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
-    from .analysis._sweep import grid_deg, sweep_grid
 
-    out = _out_path(args.out, ".npz")
+    out = _check_out_file(args.out, ".npz", args.force)
     if args.compliance:
         missing = [f for f in ("wire_stiffness", "backbone_EI", "load") if getattr(args, f) is None]
         if missing:
@@ -158,23 +235,32 @@ def cmd_sweep(args) -> None:
             design = design.replace(wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI,
                                     preload=args.preload or 0.0)
         except ValueError as e:
-            raise CLIError(str(e)) from None
+            raise _design_error(e) from None
     for name in ("theta_step", "delta_step", "dq"):
         if getattr(args, name) is not None:
             _positive("--" + name.replace("_", "-"), getattr(args, name))
+    steps = (args.theta_step or 5.0, args.delta_step or 2.5)
+    size = grid_size(85.0, steps[0]) * grid_size(360.0, steps[1])
+    if size > MAX_SWEEP_POSES:  # checked before the grid is built
+        raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} "
+                       f"poses; the command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid "
+                       "from Python takes more)")
     if args.compliance and args.theta_step is None:
         theta_deg = np.asarray(PAPER_THETA_L_DEG)  # the paper's Sec. 6.2 grid
     else:
-        theta_deg = grid_deg(85.0, args.theta_step or 5.0)  # Sec. 6.1: 0..85 deg, ends included
+        theta_deg = grid_deg(85.0, steps[0])  # Sec. 6.1: 0..85 deg, ends included
     if args.compliance and args.delta_step is None:
         delta_deg = np.asarray(PAPER_DELTA_DEG)
     else:
-        delta_deg = grid_deg(360.0, args.delta_step or 2.5)
+        delta_deg = grid_deg(360.0, steps[1])
     fn, extra = _with_compliance(args) if args.compliance else SWEEP_MEASURES[args.measure](args)
     res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
                      quiet=args.quiet, desc="sweep" + (" + compliance" if args.compliance else ""))
     th, de = np.meshgrid(theta_deg, delta_deg, indexing="ij")
-    np.savez(out, theta_L_deg=th, delta_deg=de, **res)
+    from ._io import atomic_path
+
+    with atomic_path(out) as tmp:
+        np.savez(tmp, theta_L_deg=th, delta_deg=de, **res)
     if not args.quiet:
         print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
         if args.compliance and not np.all(res["feasible"]):
@@ -196,7 +282,7 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
     s.add_argument("--measure", choices=sorted(SWEEP_MEASURES), default="kinematics",
                    help="which per-pose measures to sweep (default: kinematics)")
-    c = s.add_argument_group("compliance (issue 4: tension-only statics)")
+    c = s.add_argument_group("compliance: tension-only statics")
     c.add_argument("--compliance", action="store_true",
                    help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible")
     c.add_argument("--wire-stiffness", type=float, help="k_w (N/mm)")
@@ -204,11 +290,12 @@ def _add_sweep_parser(sub) -> None:
     c.add_argument("--load", help="tip force FX,FY,FZ (N, base frame), or six wrench components")
     c.add_argument("--preload", type=float, help="wire preload f_min (N, default 0)")
     s.add_argument("--out", required=True, help="output .npz file")
+    _add_force(s, "an existing --out file")
     s.add_argument("--quiet", action="store_true", help="no progress bar or messages")
     s.set_defaults(func=cmd_sweep)
 
 
-# ---- end sweep (issue 3) -----------------------------------------------------------------------
+# ---- end sweep -----------------------------------------------------------------------
 
 
 # ---- calibrate ---------------------------------------------------------------------------------
@@ -338,7 +425,7 @@ def _add_calibrate_parser(sub) -> None:
 
 
 
-# ---- explore (issue 16): design-space exploration ----------------------------------------------
+# ---- explore: design-space exploration ----------------------------------------------
 def _init_distributed(args) -> None:
     """Join a ``jax.distributed`` run (before anything touches a JAX device)."""
     given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes,
@@ -403,8 +490,20 @@ def _add_explore_parser(sub) -> None:
 # ---- end explore -------------------------------------------------------------------------------
 
 
+def _add_force(parser, what: str) -> None:
+    parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the command line's error rule: one line, exit status 2 (no usage block)."""
+
+    def error(self, message):
+        cmd = self.prog.split(" ", 1)[1] + ": " if " " in self.prog else ""
+        self.exit(2, f"tension-zones: error: {cmd}{_one_line(message)} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = _Parser(
         prog="tension-zones",
         description="Tension transition zones and reduced Jacobians for wire-actuated continuum robots.",
     )
@@ -414,36 +513,41 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--wires", type=int, required=True, help="number of wires (>= 3)")
     m.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
     m.add_argument("--out", required=True, help="output PNG file")
+    _add_force(m, "an existing --out file")
     m.add_argument("--quiet", action="store_true", help="print only the table")
     m.set_defaults(func=cmd_maps)
 
     o = sub.add_parser("optimize", help="search wire count, pitch radius, stiffness and placement")
     o.add_argument("--scenario", required=True, help="scenario JSON (keys: see the README)")
     o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
+    _add_force(o, "an earlier result in --out")
     o.add_argument("--quiet", action="store_true", help="no progress bar")
     o.set_defaults(func=cmd_optimize)
 
     r = sub.add_parser("reproduce", help="reproduce the paper's figures and tables into a folder")
     r.add_argument("--out", default="reproduce_out", help="output folder (default: reproduce_out)")
+    _add_force(r, "the files of a non-empty --out folder")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     r.set_defaults(func=cmd_reproduce)
-    _add_sweep_parser(sub)  # issue 3
+    _add_sweep_parser(sub)
     _add_calibrate_parser(sub)
     _add_examples_parser(sub)
     _add_explore_parser(sub)
     return p
 
 
+def _one_line(e: Exception) -> str:
+    lines = (line.strip() for line in str(e).splitlines())
+    return " ".join(line for line in lines if line) or type(e).__name__
+
+
 def main(argv=None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(argv)  # --help and usage errors (one line, status 2) exit here
     try:
         args.func(args)
-    except CLIError as e:
-        print(f"tension-zones: error: {e}", file=sys.stderr)
-        return 2
-    except (ValueError, FileNotFoundError, PermissionError, IsADirectoryError) as e:
-        print(f"tension-zones: error: {e}", file=sys.stderr)
+    except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files
+        print(f"tension-zones: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("tension-zones: interrupted", file=sys.stderr)

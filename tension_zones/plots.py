@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import matplotlib
 
 if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
@@ -20,6 +22,19 @@ from matplotlib.patches import Wedge
 from .model._zones import TensionMap
 
 _COUNT_COLOURS = {0: "#d62728", 1: "#fdd49e", 2: "#9ecae1", 3: "#74c476", 4: "#31a354"}
+#: Above this many wires a map has too many sectors and rings to label each: the sectors are then
+#: told apart by colour (legend: taut count), some rings are numbered, and the full sector list is
+#: the printed table (``TensionMap.table``).
+LABEL_MAX_WIRES = 12
+
+
+def _count_colour(k: int, counts) -> tuple | str:
+    """The shade of a sector with ``k`` taut wires; ``counts``: the counts the map has. Few wires:
+    the paper's fixed shades; otherwise one colour scale over the counts present."""
+    if max(counts) <= 4:
+        return _COUNT_COLOURS[k]
+    lo, hi = min(counts), max(counts)
+    return plt.get_cmap("viridis")(0.15 + 0.8 * (k - lo) / max(hi - lo, 1))
 
 
 def _wire_colour(k: int, n: int):
@@ -32,38 +47,53 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
     The inner disk is split into the sectors of constant taut set, shaded by the number of taut
     wires and labelled with the wires; each wire's 180 deg zone is an offset ring outside it (wire 1
     innermost). Angles are the bending-plane angle ``delta`` (deg), counter-clockwise from x.
-    Point sectors (a single direction with fewer taut wires) are drawn as dashed rays.
+    Point sectors (a single direction with fewer taut wires) are drawn as dashed rays. Above
+    :data:`LABEL_MAX_WIRES` wires the rings are thinner and only every few is numbered, sectors are
+    labelled by their taut count where they are wide enough, and rays carry no count.
     """
     if ax is None:
         _, ax = plt.subplots(figsize=(6.4, 6.4))
     n = tmap.n_wires
-    ring0, ring_w = 1.08, 0.09
+    many = n > LABEL_MAX_WIRES
+    ring0, ring_w = 1.08, (0.09 if not many else 1.1 / n)  # the ring band stays within ~1.1
+    ring_step = 1 if not many else math.ceil(n / LABEL_MAX_WIRES)
     sectors = list(tmap.sectors)
+    present = sorted({s.n_taut for s in sectors if s.width_deg > 0}) or [0]
     first, last = sectors[0], sectors[-1]
     if len(sectors) > 1 and first.width_deg > 0 and last.width_deg > 0 and first.wires == last.wires:
         # the table splits the sector through 0 deg; draw it whole
         sectors = [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
     for s in sectors:
         if s.width_deg > 0:
-            colour = _COUNT_COLOURS.get(s.n_taut, "#006d2c")
-            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg, fc=colour, ec="white", lw=1.0))
+            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg,
+                               fc=_count_colour(s.n_taut, present), ec="white",
+                               lw=1.0 if not many else 0.4))
             mid = np.radians(0.5 * (s.start_deg + s.end_deg))
             rad = 0.62 if s.width_deg > 25 else 0.8
-            label = ",".join(map(str, s.wires)) or "none"
+            if not many:
+                label = ",".join(map(str, s.wires)) or "none"
+            elif s.width_deg >= 20:
+                label = f"{s.n_taut}"
+            else:
+                continue
             ax.text(rad * np.cos(mid), rad * np.sin(mid), label, ha="center", va="center", fontsize=9)
         else:
             a = np.radians(s.start_deg)
-            ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2)
-            ax.text(1.0 * np.cos(a) * 0.45, 1.0 * np.sin(a) * 0.45, f"{s.n_taut}",
-                    fontsize=8, ha="center", va="center",
-                    bbox=dict(boxstyle="circle,pad=0.15", fc="white", ec="k", lw=0.6))
+            ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2 if not many else 0.5)
+            if not many:
+                ax.text(1.0 * np.cos(a) * 0.45, 1.0 * np.sin(a) * 0.45, f"{s.n_taut}",
+                        fontsize=8, ha="center", va="center",
+                        bbox=dict(boxstyle="circle,pad=0.15", fc="white", ec="k", lw=0.6))
     for k, (a, b) in enumerate(tmap.zones_deg):
         r_out = ring0 + (k + 1) * ring_w
         ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n),
                            ec="none", alpha=0.85))
-        mid = np.radians(0.5 * (a + b))
-        ax.text((r_out - 0.04) * np.cos(mid), (r_out - 0.04) * np.sin(mid), str(k + 1),
-                ha="center", va="center", fontsize=7, color="white", fontweight="bold")
+        if k % ring_step == 0:
+            mid = np.radians(0.5 * (a + b))
+            r_txt = r_out - (0.04 if not many else 0.4 * ring_w)
+            ax.text(r_txt * np.cos(mid), r_txt * np.sin(mid), str(k + 1), ha="center",
+                    va="center", fontsize=7 if not many else 5,
+                    color="white" if not many else "k", fontweight="bold")
     r_max = ring0 + (n + 1) * ring_w
     for deg in range(0, 360, 30):
         a = np.radians(deg)
@@ -72,14 +102,13 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         ax.text((r_max + 0.13) * np.cos(a), (r_max + 0.13) * np.sin(a), f"{deg}°",
                 ha="center", va="center", fontsize=8, color="0.3")
     ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
-    handles = [plt.Rectangle((0, 0), 1, 1, fc=c) for c in
-               [_COUNT_COLOURS[k] for k in sorted({s.n_taut for s in tmap.sectors
-                                                   if s.width_deg > 0 and s.n_taut <= 4})]]
-    labels = [f"{k} taut" for k in sorted({s.n_taut for s in tmap.sectors
-                                           if s.width_deg > 0 and s.n_taut <= 4})]
+    # a legend of at most eight entries
+    counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]
+    handles = [plt.Rectangle((0, 0), 1, 1, fc=_count_colour(k, present)) for k in counts]
+    labels = [f"{k} taut" for k in counts]
     if any(s.width_deg == 0 for s in sectors):
         handles.append(plt.Line2D([], [], ls="--", color="k"))
-        labels.append("single direction (circled: taut count)")
+        labels.append("single direction" + (" (circled: taut count)" if not many else ""))
     ax.legend(handles, labels, loc="lower left", fontsize=8, frameon=False,
               bbox_to_anchor=(-0.05, -0.08))
     lim = r_max + 0.3
@@ -143,7 +172,7 @@ def plot_convergence(result: dict, path, infeasible_rank: float):
     plt.close(fig)
 
 
-# ---- design-space exploration (issue 16) --------------------------------------------------------
+# ---- design-space exploration --------------------------------------------------------
 def _label(column: str) -> str:
     """An exploration column (``name``, ``min:name`` or ``max:name``) with its unit and which way is better."""
     from .design._explore import UNITS, objective

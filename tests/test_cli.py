@@ -46,6 +46,7 @@ def test_bad_out_paths(tmp_path, capsys):
     assert "must end in .png" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_console_script_runs(tmp_path):
     r = subprocess.run([sys.executable, "-m", "tension_zones.cli", "maps", "--wires", "5",
                         "--out", str(tmp_path / "m5.png"), "--quiet"],
@@ -54,6 +55,7 @@ def test_console_script_runs(tmp_path):
     assert "wires" in r.stdout and r.stderr == ""
 
 
+@pytest.mark.slow
 def test_sweep_compliance_adds_the_statics_arrays(tmp_path):
     import numpy as np
 
@@ -97,3 +99,53 @@ def test_sweep_compliance_errors(tmp_path, capsys, extra, needle):
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1
     assert not out.exists()
+
+
+LAZY = """
+import sys, time
+t0 = time.perf_counter()
+from tension_zones.cli import main
+for argv in (["--help"], ["maps", "--help"], ["sweep", "--help"], ["optimize", "--help"],
+             ["reproduce", "--help"], ["calibrate", "--help"]):
+    try:
+        main(argv)
+    except SystemExit as e:
+        assert e.code == 0, (argv, e.code)
+import tension_zones as tz
+assert "jax" not in sys.modules, sorted(m for m in sys.modules if m.startswith("jax"))
+assert "Design" in dir(tz) and "Design" in tz.__all__
+print("help-seconds", time.perf_counter() - t0, file=sys.stderr)
+import jax.numpy as jnp  # imported after the package: float64 is on before any array is made
+assert jnp.ones(1).dtype == jnp.float64
+assert tz.Design(3, 20.0, 2.0).length.dtype == jnp.float64
+for name in tz.__all__:
+    getattr(tz, name)
+print("lazy ok")
+"""
+
+
+@pytest.mark.slow
+def test_help_and_import_do_not_import_jax():
+    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300,
+                       check=False)
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert r.stdout.strip().endswith("lazy ok")
+
+
+@pytest.mark.parametrize("n", [16, 64])
+def test_maps_of_many_wires_stay_legible(tmp_path, n):
+    """Issue 14: 64 wires drew a black band of labels. Above plots.LABEL_MAX_WIRES the sectors carry
+    at most their taut count, and only every few rings is numbered."""
+    import matplotlib.pyplot as plt
+
+    import tension_zones as tz
+    from tension_zones.plots import LABEL_MAX_WIRES, plot_tension_map
+
+    assert n > LABEL_MAX_WIRES
+    fig, ax = plt.subplots()
+    plot_tension_map(tz.tension_map(tz.Design(n, 20.0, 2.0)), ax=ax)
+    labels = [t.get_text() for t in ax.texts]
+    plt.close(fig)
+    assert len(labels) <= 40, len(labels)  # before: 204 at 64 wires (every sector, ray and ring)
+    assert all("," not in t for t in labels)  # no lists of wires
+    assert main(["maps", "--wires", str(n), "--out", str(tmp_path / "m.png"), "--quiet"]) == 0

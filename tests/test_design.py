@@ -132,3 +132,76 @@ def test_float32_design():
     assert J.dtype == jnp.float32 and np.all(np.isfinite(J))
     d64 = tz.Design(3, 20.0, 2.0)
     np.testing.assert_allclose(p, tz.tip_pose(d64, 1.0, 0.3)[0], rtol=1e-5)
+
+
+# -- design files: one line naming the key -------------------------------------------
+_BASE = {"n_wires": 3, "length_mm": 20, "pitch_radius_mm": 2}
+
+
+@pytest.mark.parametrize(
+    "change, needle",
+    [
+        ({"n_wires": "3"}, r"n_wires must be an integer of at least 3, got '3' \(a string\)"),
+        ({"n_wires": "3", "wire_angles_deg": [0, 120, 240]}, r"n_wires must be an integer.*'3'"),
+        ({"n_wires": True}, r"n_wires must be an integer.*True \(a boolean\)"),
+        ({"n_wires": 3.5}, r"n_wires must be an integer.*3\.5"),
+        ({"n_wires": None}, r"n_wires must be an integer.*null"),
+        ({"length_mm": "20"}, r"length_mm must be a number, got '20' \(a string\)"),
+        ({"length_mm": True}, r"length_mm must be a number, got True \(a boolean\)"),
+        ({"pitch_radius_mm": None}, r"pitch_radius_mm must be a number, got null"),
+        ({"preload_N": [1]}, r"preload_N must be a number, got \[1\] \(a list\)"),
+        ({"backbone_EI_Nmm2": {"v": 1}}, r"backbone_EI_Nmm2 must be a number.*\(an object\)"),
+        ({"length_mm": -1}, r"length_mm must be positive, got -1\.0"),
+        ({"wire_stiffness_N_per_mm": 0}, r"wire_stiffness_N_per_mm must be positive"),
+        ({"preload_N": float("nan")}, r"preload_N must be finite"),
+        ({"wire_angles_deg": 5}, r"wire_angles_deg must be a list of numbers, got 5"),
+        ({"wire_angles_deg": ["a", 1, 2]}, r"wire_angles_deg\[0\] must be a number, got 'a' \(a string\)"),
+        ({"wire_angles_deg": [0, True, 2]}, r"wire_angles_deg\[1\] must be a number, got True"),
+        ({"wire_angles_deg": [0, [1], 2]}, r"wire_angles_deg\[1\] must be a number, got \[1\] \(a list\)"),
+        ({"wire_angles_deg": [0, 90]}, r"wire_angles_deg must have n_wires = 3 entries, got 2 entries"),
+    ],
+)
+def test_design_file_errors_name_the_key(change, needle):
+    with pytest.raises(ValueError, match=needle) as e:
+        tz.Design.from_dict({**_BASE, **change})
+    assert "\n" not in str(e.value)
+
+
+def test_from_json_names_the_file_and_accepts_a_bom(tmp_path):
+    p = tmp_path / "d.design.json"
+    p.write_bytes(b"\xef\xbb\xbf" + b'{"n_wires": 3, "length_mm": 20, "pitch_radius_mm": 2}')
+    assert tz.Design.from_json(p).n_wires == 3
+    p.write_text('{"n_wires": "3", "length_mm": 20, "pitch_radius_mm": 2}')
+    with pytest.raises(ValueError, match=r"^design file '.*d\.design\.json': n_wires must be an integer"):
+        tz.Design.from_json(p)
+    p.write_bytes(b'{"n_wires": 3, "length_mm": \xff}')
+    with pytest.raises(ValueError, match="is not UTF-8 text"):
+        tz.Design.from_json(p)
+
+
+def test_missing_physical_keys_are_named_on_request():
+    import warnings
+
+    from tension_zones.model import PHYSICAL_KEYS, MissingDesignKeyWarning, missing_physical_keys
+
+    assert PHYSICAL_KEYS == ("wire_stiffness_N_per_mm", "backbone_EI_Nmm2", "preload_N")
+    d = {**_BASE, "wire_stiffness_N_per_mm": 80.0}
+    assert missing_physical_keys(d) == ["backbone_EI_Nmm2", "preload_N"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # opt-in: no warning by default
+        assert float(tz.Design.from_dict(d).backbone_EI) == tz.DEFAULT_BACKBONE_EI
+    with pytest.warns(MissingDesignKeyWarning, match=r"'backbone_EI_Nmm2' \(default 1200 used\), "
+                                                     r"'preload_N' \(default 0 used\)") as rec:
+        tz.Design.from_dict(d, warn_missing=True)
+    assert len(rec) == 1 and "wire_stiffness" not in str(rec[0].message)
+    full = {**d, "backbone_EI_Nmm2": 900.0, "preload_N": 1.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tz.Design.from_dict(full, warn_missing=True)
+
+
+def test_constructor_rejects_booleans_and_strings():
+    with pytest.raises(ValueError, match=r"length must be a number, got True"):
+        tz.Design(3, True, 2.0)
+    with pytest.raises(ValueError, match=r"pitch_radius must be a number, got '2'"):
+        tz.Design(3, 20.0, "2")

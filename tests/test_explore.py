@@ -1,4 +1,4 @@
-"""Design-space exploration (issue 16): per-design statistics, chunks, recompiles, resuming, two
+"""Design-space exploration: per-design statistics, chunks, recompiles, resuming, two
 jax.distributed processes, the Pareto front and the space file's errors.
 
 Compiled programs are shared between tests: the explorations here use 3 or 4 wires, 4 designs per

@@ -322,3 +322,145 @@ def test_a_swept_pose_evaluates_four_sines_and_cosines(n):
     per_pose = re.findall(r"= f64\[([^\]]*)\]\S* (sine|cosine)\(", hlo)
     per_pose = sorted(op for shape, op in per_pose if str(N) in shape)
     assert per_pose == ["cosine", "cosine", "sine", "sine"]
+
+
+# ------------------------------------------------------------------------------------------------
+# Many wires: arrays over the wire axis above UNROLL_MAX_WIRES, same numbers
+# ------------------------------------------------------------------------------------------------
+def _measures_at(design, th, de, mask, dq=0.4):
+    """The reduced measures at many poses (one mode: half the program of pose_metrics)."""
+    return jax.jit(jax.vmap(lambda a, b, m: pose_measures(design, a, b, dq, m)))(th, de, mask)
+
+
+@pytest.mark.parametrize("n, even", [(9, False)])
+def test_many_wires_array_form_matches_the_unrolled_form(n, even, monkeypatch):
+    from tension_zones import _numerics
+
+    rng = np.random.default_rng(n)
+    angles = None if even else np.sort(rng.uniform(0.0, 2 * np.pi, n))
+    d = tz.Design(n, 20.0, 2.0, wire_angles=angles)
+    th = jnp.asarray(np.concatenate([rng.uniform(0.0, 1.6, 60), [np.pi / 2, np.pi / 2 - 1e-7]]))
+    de = jnp.asarray(np.concatenate([rng.uniform(-7.0, 7.0, 60), [0.3, 1.1]]))
+    assert not _numerics.unrolled(n)
+    mask = jax.vmap(lambda e: tz.tension_mask(d, e))(de)
+    arrays = _measures_at(d, th, de, mask)
+    monkeypatch.setattr(_numerics, "UNROLL_MAX_WIRES", 64)  # the per-wire scalars, unrolled
+    lists = _measures_at(d, th, de, mask)
+    for k in lists:
+        np.testing.assert_allclose(arrays[k], lists[k], rtol=1e-12, atol=1e-14, err_msg=k)
+    monkeypatch.undo()
+    g = jax.grad(lambda r: pose_metrics(d.replace(pitch_radius=r), 0.7, 0.2)["dp_max_reduced"])(2.0)
+    assert np.isfinite(float(g)) and float(g) < 0  # dp_max ~ L / r
+
+
+def test_many_wires_match_the_reference():
+    d = tz.Design(9, 20.0, 2.0, wire_angles=rad(np.sort(np.random.default_rng(9).uniform(0, 360, 9))))
+    for t, e in ((0.6, 0.4), (1.2, 2.9), (np.pi / 2 - 0.01, 5.0)):
+        out = pose_metrics(d, t, e, 0.3)
+        for mode in ("full", "reduced"):
+            ref = ref_measures(20.0, 2.0, np.asarray(d.wire_angles), t, e, 0.3, mode == "reduced")
+            for k in MEASURES:
+                scale = max(abs(ref[k]), SCALE.get(k, 0.0))
+                assert abs(float(out[f"{k}_{mode}"]) - ref[k]) <= 1e-9 * scale, (mode, k)
+
+
+@pytest.mark.parametrize("fn", ["kinematics", "compliance"])
+def test_the_program_does_not_grow_with_the_wire_count(fn):
+    """No per-wire unrolling above UNROLL_MAX_WIRES: the traced program of one pose has the same
+    size for 16 and 64 wires (the unrolled one grew with n^2: 67 s to compile at 24 wires)."""
+    def size(n):
+        d = tz.Design(n, 20.0, 2.0)
+
+        def f(t, e):
+            if fn == "kinematics":
+                return pose_metrics(d, t, e, 0.4)
+            return tz.compliance_pose(d, t, e, jnp.asarray([5.0, 0.0, 0.0]))
+
+        return len(jax.make_jaxpr(f)(0.5, 0.3).eqns)
+
+    assert size(16) == size(64)
+
+
+# ------------------------------------------------------------------------------------------------
+# NaN in, NaN out: never a plausible 0
+# ------------------------------------------------------------------------------------------------
+NAN = float("nan")
+_W = jnp.asarray([5.0, 0.0, 0.0])
+_metrics_jit, _measures_jit = jax.jit(pose_metrics), jax.jit(pose_measures)
+
+
+def _all_nan(out):
+    for k, v in out.items():
+        v = np.asarray(v)
+        if v.dtype == bool:
+            assert not v.any(), k
+        elif np.issubdtype(v.dtype, np.integer):
+            assert np.all(v == -1), k
+        else:
+            assert np.all(np.isnan(v)), k
+
+
+@pytest.mark.parametrize("n", [3, 4, 12])
+def test_nan_inputs_give_nan_for_every_measure(n):
+    d = tz.Design(n, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0)
+    bad_inputs = {"theta_L": NAN, "delta": NAN, "dq": NAN, "inf theta_L": np.inf, "inf dq": np.inf}
+    for bad, value in bad_inputs.items():
+        pose = {"theta_L": 0.6, "delta": 0.4, "dq": 0.4, bad.split()[-1]: value}
+        args = (d, pose["theta_L"], pose["delta"], pose["dq"])
+        for out in (_metrics_jit(*args), _measures_jit(*args),
+                    _measures_jit(*args, tz.tension_mask(d, 0.4))):
+            assert len(out) >= len(MEASURES)
+            _all_nan(out)
+        if "dq" not in bad:
+            _all_nan(tz.compliance_pose_jit(d, pose["theta_L"], pose["delta"], _W))
+    assert np.all(np.isnan(tz.tension_mask(d, NAN))) and np.all(np.isnan(tz.tension_score(d, NAN)))
+    assert np.all(np.isnan(tz.tension_score(d, NAN, theta_L=0.6, psi_dot=[-1.0, 0.3])))
+    # the box dq [-1, 1]^n is symmetric: a negative dq is the same box, not an error
+    neg = _metrics_jit(d, 0.6, 0.4, -0.4)
+    assert float(neg["dp_max_reduced"]) == float(_metrics_jit(d, 0.6, 0.4, 0.4)["dp_max_reduced"])
+    # NaN in one pose of a sweep stays in that pose
+    th = jnp.asarray([0.6, NAN, 0.8])
+    dp = np.asarray(jax.vmap(_metrics_jit, in_axes=(None, 0, None, None))(d, th, 0.4, 0.4)["dp_max_reduced"])
+    assert np.isnan(dp[1]) and np.all(np.isfinite(dp[[0, 2]]))
+
+
+def test_nan_mask_gives_nan():
+    d = tz.Design(3, 20.0, 2.0)
+    _all_nan(pose_measures(d, 0.6, 0.4, 0.4, mask=jnp.asarray([1.0, NAN, 0.0])))
+
+
+def test_finite_values_and_gradients_are_unchanged_by_the_nan_guard():
+    d = tz.Design(4, 20.0, 2.0)
+    g = jax.grad(lambda t: pose_metrics(d, t, 0.4, 0.4)["dp_max_reduced"])(0.6)
+    h = 1e-6
+    fd = (pose_metrics(d, 0.6 + h, 0.4, 0.4)["dp_max_reduced"]
+          - pose_metrics(d, 0.6 - h, 0.4, 0.4)["dp_max_reduced"]) / (2 * h)
+    assert float(g) == pytest.approx(float(fd), rel=1e-6)
+    g_mask = jax.grad(lambda e: jnp.sum(tz.tension_mask(d, e)))(0.4)  # the surrogate's gradient
+    assert np.isfinite(float(g_mask)) and float(g_mask) != 0.0
+
+
+@pytest.mark.parametrize("field, value", [("length", -20.0), ("pitch_radius", -2.0),
+                                          ("pitch_radius", 0.0), ("wire_stiffness", -75.0),
+                                          ("backbone_EI", -1.0), ("preload", -1.0),
+                                          ("length", NAN), ("wire_angles", NAN)])
+def test_a_design_built_under_jit_with_an_invalid_value_gives_nan(field, value):
+    """Design() cannot raise for traced values; the measures are NaN instead (Design docstring)."""
+    def build(v):
+        kw = {"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_stiffness": 75.0,
+              "backbone_EI": 1200.0, "preload": 0.5}
+        kw[field] = jnp.full(3, v).at[1:].set(jnp.asarray([2.0, 4.0])) if field == "wire_angles" else v
+        return tz.Design(**kw)
+
+    metrics = jax.jit(lambda v: pose_metrics(build(v), 0.6, 0.4, 0.4))
+    comp = jax.jit(lambda v: tz.compliance_pose(build(v), 0.6, 0.4, _W))
+    valid = {"length": 20.0, "pitch_radius": 2.0, "wire_stiffness": 75.0, "backbone_EI": 1200.0,
+             "preload": 0.5, "wire_angles": 0.0}[field]
+    assert np.isfinite(float(metrics(valid)["dp_max_reduced"]))
+    assert bool(jax.jit(lambda v: build(v).invalid())(value))
+    assert not bool(jax.jit(lambda v: build(v).invalid())(valid))
+    _all_nan(comp(value))
+    if field in ("length", "pitch_radius", "wire_angles"):  # what the kinematic measures use
+        _all_nan(metrics(value))
+    with pytest.raises(ValueError, match=field):  # concrete: the constructor's one-line error
+        build(value)

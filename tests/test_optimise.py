@@ -105,13 +105,20 @@ def test_parametrisation_meets_constraints(n, zr, zk, za, zg, with_arc):
 
 # -- controllability --------------------------------------------------------------------------
 def test_controllability_is_checked_between_grid_points():
-    # four evenly spaced wires rotated so that no 10-deg grid direction hits a wire line: still
-    # one taut wire on those lines, so still infeasible over the continuous range
-    sc = parse_scenario({"n_wires": [4], "delta_deg": [0.0, 350.0, 10.0],
-                         "theta_L_deg": [40.0, 80.0, 40.0], "weights": {"deflection": 0.0}})
+    # four evenly spaced wires rotated so that no 10-deg grid direction hits a wire line: under the
+    # strict rule still one taut wire on those lines, so still infeasible over the continuous range
+    task = {"n_wires": [4], "delta_deg": [0.0, 350.0, 10.0], "theta_L_deg": [40.0, 80.0, 40.0],
+            "weights": {"deflection": 0.0}}
+    sc = parse_scenario({**task, "strict_controllability": True})
     rotated = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([5.0, 95.0, 185.0, 275.0]))
     row = opt.evaluate_design(sc, rotated)
     assert not row["feasible"] and row["min_spread"] == 0.0
+    # the default rule: a one-wire sector of finite width (265-268 deg) between grid points
+    skew = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([2.0, 92.0, 185.0, 272.0]))
+    row = opt.evaluate_design(parse_scenario(task), skew)
+    assert not row["feasible"] and row["min_spread"] == 0.0 and row["spread_violations"] == 1
+    sc = parse_scenario({"n_wires": [4], "delta_deg": [0.0, 350.0, 10.0],
+                         "theta_L_deg": [40.0, 80.0, 40.0], "weights": {"deflection": 0.0}})
     five = opt.evaluate_design(sc, tz.Design(5, 20.0, 2.0))
     assert five["feasible"] and five["min_spread"] > 0.5
     # a range that excludes every wire line: the four-wire design is fine there
@@ -173,6 +180,7 @@ def _brute_force(sc, step_deg, centre=None, half_width=None):
     return exact[i], A[i]
 
 
+@pytest.mark.slow
 def test_restricted_directions_match_brute_force_and_even_layout_is_infeasible():
     sc = parse_scenario(RESTRICTED)
     even = opt.evaluate_design(sc, tz.Design(3, 20.0, 2.0))
@@ -193,6 +201,7 @@ SMALL = {"n_wires": [3], "pitch_radius_mm": [1.0, 2.5], "wire_stiffness_N_per_mm
          "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
 
 
+@pytest.mark.slow
 def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
     # dp_max ~ L / r and the deflection falls with r and k_w: with no geometric limit and no cost
     # on them the optimum is both upper bounds
@@ -208,6 +217,7 @@ def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
     assert row["pitch_radius_mm"] == pytest.approx(2.0 - 0.2 - 0.15, rel=1e-9)
 
 
+@pytest.mark.slow
 def test_new_numbers_of_the_same_shapes_do_not_recompile():
     opt.optimize(parse_scenario(SMALL), progress=False)
     before = opt._run_starts._cache_size()
@@ -220,6 +230,7 @@ def test_new_numbers_of_the_same_shapes_do_not_recompile():
     assert opt._run_starts._cache_size() == before
 
 
+@pytest.mark.slow
 def test_gradients_agree_with_finite_differences_away_from_switches():
     from tension_zones._numerics import frozen_masks
 
@@ -246,19 +257,24 @@ def test_gradients_agree_with_finite_differences_away_from_switches():
     np.testing.assert_allclose(g_st, fd, rtol=0.05, atol=0.05 * np.abs(fd).max())
 
 
-def test_readme_documents_every_scenario_key_and_default():
+def test_design_readme_documents_every_scenario_key_and_default():
+    """The scenario reference lives beside the code (tension_zones/design/README.md)."""
     import json
     import pathlib
 
-    readme = (pathlib.Path(__file__).resolve().parents[1] / "README.md").read_text()
+    from tension_zones.design._scenario import DOC
+
+    readme = (pathlib.Path(tz.__file__).parent / "design" / "README.md").read_text()
+    assert set(DOC) == set(DEFAULTS)
     for key, value in DEFAULTS.items():
-        assert f"| `{key}` | `{json.dumps(value)}` |" in readme, key
+        assert f"| `{key}` | `{json.dumps(value)}` | {DOC[key]} |" in readme, key
 
 
 @given(st.integers(3, 4), st.lists(st.floats(0.0, 2 * np.pi), min_size=4, max_size=4))
-def test_full_circle_controllability_needs_five_wires(n, angles):
+def test_strict_full_circle_controllability_needs_five_wires(n, angles):
     # the open half-planes of a direction and its opposite hold at most n - 1 wires when their
     # dividing line passes through a wire: three or four wires always leave a direction with one
+    # (a single direction for four even wires: a violation only with strict_controllability)
     a = np.sort(np.mod(angles[:n], 2 * np.pi))
     if np.min(np.diff(np.concatenate([a, a[:1] + 2 * np.pi]))) < 1e-3:
         return  # coincident wires are not a design
@@ -267,3 +283,76 @@ def test_full_circle_controllability_needs_five_wires(n, angles):
     assert float(jnp.min(spreads)) == 0.0
     five = tz.Design(5, 20.0, 2.0)
     assert float(jnp.min(jax.vmap(lambda x: opt.spread(five, x))(opt.zone_boundaries(five)))) > 0.5
+
+
+
+# -- zero width: single directions are reported, finite sectors are violations ----------
+FULL_CIRCLE = {"theta_L_deg": [30.0, 80.0, 25.0], "delta_deg": [0.0, 360.0, 10.0],
+               "pitch_radius_mm": [1.0, 2.5],
+               "weights": {"position_uncertainty": 1.0, "deflection": 0.0, "wire_count": 0.0},
+               "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
+
+
+@pytest.mark.slow
+def test_four_even_wires_over_a_full_circle_are_feasible_and_reach_the_radius_bound():
+    res = opt.optimize(parse_scenario({**FULL_CIRCLE, "n_wires": [4]}), progress=False)
+    best = res["best"]
+    assert best is not None and best["feasible"] and best["n_wires"] == 4
+    assert best["pitch_radius_mm"] == pytest.approx(2.5, rel=1e-9)  # dp_max ~ L / r
+    assert best["spread_violations"] == 0 and best["min_spread"] == pytest.approx(1.0)
+    # one taut wire exactly along each wire's line: reported, not counted
+    assert best["zero_width_directions_deg"] == [0.0, 90.0, 180.0, 270.0]
+    assert res["strict_controllability"] is False
+
+
+def test_three_even_wires_stay_infeasible_and_strict_keeps_the_old_rule():
+    sc = parse_scenario(FULL_CIRCLE)
+    three = opt.evaluate_design(sc, tz.Design(3, 20.0, 2.0))
+    # the three one-wire sectors are 60 deg wide: finite, so violations under either rule
+    assert not three["feasible"] and three["spread_violations"] == 3
+    assert three["zero_width_directions_deg"] == []
+    strict = parse_scenario({**FULL_CIRCLE, "strict_controllability": True})
+    assert not opt.evaluate_design(strict, tz.Design(3, 20.0, 2.0))["feasible"]
+    four = opt.evaluate_design(strict, tz.Design(4, 20.0, 2.0))
+    # the old rule: grid directions 0, 90, 180, 270, 360 and the 8 zone boundaries, one wire each
+    assert not four["feasible"] and four["spread_violations"] == 13 and four["min_spread"] == 0.0
+    assert four["zero_width_directions_deg"] == [0.0, 90.0, 180.0, 270.0]
+    old = opt._range_spread(tz.Design(4, 20.0, 2.0), opt._task(strict))
+    assert int(jnp.sum(old < strict.min_spread)) == four["spread_violations"]
+
+
+def test_zero_width_at_the_ends_of_a_partial_range_and_a_single_direction():
+    four = tz.Design(4, 20.0, 2.0)
+    part = parse_scenario({**FULL_CIRCLE, "delta_deg": [0.0, 90.0, 10.0]})
+    row = opt.evaluate_design(part, four)
+    assert row["feasible"] and row["zero_width_directions_deg"] == [0.0, 90.0]
+    # a task of one direction, exactly along a wire: that direction is all it needs (strict there)
+    one = parse_scenario({**FULL_CIRCLE, "delta_deg": [90.0, 90.0, 10.0]})
+    assert not opt.evaluate_design(one, four)["feasible"]
+    assert opt.evaluate_design(parse_scenario({**FULL_CIRCLE, "delta_deg": [45.0, 45.0, 10.0]}),
+                               four)["feasible"]
+
+
+_sector_min = jax.jit(lambda d, task: jnp.min(opt._sector_spread(d, task)))
+
+
+@given(st.lists(st.floats(0.0, 2 * np.pi), min_size=4, max_size=4), st.floats(0.4, 2.7))
+def test_four_wires_need_opposite_wires_opposite(angles, gap):
+    """Without zero width, four wires pass a full circle only when opposite wires are diametrically
+    opposite (else three consecutive wires span less than 180 deg: a one-wire sector of finite width)."""
+    task = opt._task(parse_scenario(FULL_CIRCLE))
+    a = np.sort(np.mod(angles, 2 * np.pi))
+    gaps = np.diff(np.concatenate([a, a[:1] + 2 * np.pi]))
+    if np.min(gaps) < 1e-3:
+        return  # coincident wires are not a design
+    opposite = abs(gaps[0] - gaps[2]) < 1e-9 and abs(gaps[1] - gaps[3]) < 1e-9
+    got = float(_sector_min(tz.Design(4, 20.0, 2.0, wire_angles=a), task))
+    assert (got > 0.0) == opposite, (np.degrees(a), got)
+    par = tz.Design(4, 20.0, 2.0, wire_angles=np.array([0.0, gap, np.pi, np.pi + gap]) + a[0])
+    assert float(_sector_min(par, task)) == pytest.approx(np.sqrt(1 - abs(np.cos(gap))), rel=1e-9)
+
+
+def test_scenario_strict_controllability_must_be_a_boolean():
+    with pytest.raises(ValueError, match="'strict_controllability': must be true or false"):
+        parse_scenario({"strict_controllability": "yes"})
+    assert parse_scenario({}).strict_controllability is False

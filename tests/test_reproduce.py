@@ -3,6 +3,8 @@
 import json
 import pathlib
 
+import pytest
+
 from tension_zones.cli import main
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -19,6 +21,7 @@ def test_readme_has_exactly_the_two_setup_commands():
     assert "test-command" in (ROOT / ".ci" / "run").read_text()
 
 
+@pytest.mark.slow
 def test_reproduce_writes_figures_and_summary(tmp_path):
     assert main(["reproduce", "--out", str(tmp_path), "--quiet"]) == 0
     summary = json.loads((tmp_path / "summary.json").read_text())

@@ -97,7 +97,7 @@ def test_robot_from_dict_single_and_multi(tmp_path):
     assert rob3.n_wires_per_segment == (3, 3, 3)
     np.testing.assert_allclose(rob3.lengths, [60.0, 62.5, 64.0])
     assert ms.Robot.from_dict(rob3.to_dict()).n_wires == 9
-    with pytest.raises(ValueError, match="segment 1: pitch_radius must be positive"):
+    with pytest.raises(ValueError, match="segment 1: pitch_radius_mm must be positive"):
         ms.Robot.from_dict({"segments": [seg, dict(seg, pitch_radius_mm=-1.0)]})
     with pytest.raises(ValueError, match="unknown robot design key"):
         ms.Robot.from_dict({"segments": [seg], "twist": 1})

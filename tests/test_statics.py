@@ -285,3 +285,56 @@ def test_tension_qp_matches_reference_for_any_layout(angles, rhs, f_min):
         np.testing.assert_allclose(sol.tau, ref, rtol=1e-7, atol=1e-7 * max(1.0, ref.max()))
     elif ref_ok and np.linalg.cond(A @ A.T) < 1e8:
         pytest.fail(f"feasible by the reference, flagged infeasible: {sol}")
+
+
+# ------------------------------------------------------------------------------------------------
+# Many wires: the free set among O(n^2) runs of wires instead of 2^n subsets
+# ------------------------------------------------------------------------------------------------
+_subsets_qp = jax.jit(jax.vmap(S.min_norm_tensions, in_axes=(None, 0, None)))
+
+
+@settings(max_examples=15, deadline=None)
+@given(n=st.sampled_from([5, 9]), even=st.booleans(), seed=st.integers(0, 2**16),
+       f_min=st.sampled_from([0.0, 0.5, 5.0]))
+def test_runs_of_wires_give_the_same_tensions_as_all_subsets(n, even, seed, f_min):
+    """The solution's free set is a run of wires consecutive in angle (A = J_qb^T): choosing among
+    the runs gives the tensions, multipliers and feasibility of the 2^n-subset enumeration."""
+    rng = np.random.default_rng(seed)
+    a = np.arange(n) * 2 * np.pi / n if even else np.sort(rng.uniform(0.0, 2 * np.pi, n))
+    A = jnp.asarray(-1.6 * np.stack([np.cos(a), np.sin(a)]))
+    rhs = jnp.asarray(rng.normal(0.0, 10.0, (64, 2)) * rng.choice([1e-3, 1.0, 10.0], (64, 1)))
+    subsets = _subsets_qp(A, rhs, f_min)
+    runs = _runs_qp_jit(A, rhs, f_min)
+    np.testing.assert_array_equal(np.asarray(runs.feasible), np.asarray(subsets.feasible))
+    ok = np.asarray(subsets.feasible)
+    scale = 1.0 + np.abs(np.asarray(subsets.tau)[ok])
+    assert np.all(np.abs(np.asarray(runs.tau)[ok] - np.asarray(subsets.tau)[ok]) <= 1e-10 * scale)
+
+
+def _runs_qp(A, rhs, f_min):
+    """min_norm_tensions with the runs of wires whatever the wire count (set while tracing)."""
+    saved = S.MAX_SUBSET_WIRES
+    S.MAX_SUBSET_WIRES = 0
+    try:
+        return S.min_norm_tensions(A, rhs, f_min)
+    finally:
+        S.MAX_SUBSET_WIRES = saved
+
+
+_runs_qp_jit = jax.jit(jax.vmap(_runs_qp, in_axes=(None, 0, None)))
+
+
+@pytest.mark.parametrize("n, preload", [(16, 0.0), (32, 2.0), (64, 0.0)])
+def test_many_wires_hold_every_pose_by_pulling(n, preload):
+    """Evenly spaced wires hold any pose: feasible, KKT to 1e-9, equilibrium, pull only."""
+    d = _design(n, preload=preload)
+    rng = np.random.default_rng(n)
+    th, de = rng.uniform(0.0, np.pi / 2, 40), rng.uniform(-np.pi, np.pi, 40)
+    w = jnp.asarray([3.0, -2.0, 1.0, 0.0, 0.0, 0.0])
+    A, rhs, sol = jax.vmap(lambda t, e: _solve(d, t, e, w))(jnp.asarray(th), jnp.asarray(de))
+    assert np.all(np.asarray(sol.feasible)) and float(jnp.max(sol.kkt_residual)) < 1e-9
+    tau = np.asarray(sol.tau)
+    assert np.all(tau >= preload - 1e-9)
+    np.testing.assert_allclose(np.einsum("pij,pj->pi", np.asarray(A), tau), np.asarray(rhs), atol=1e-8)
+    out = _pose(d, 0.9, 0.3, w)
+    assert bool(out["feasible"]) and np.isfinite(float(out["deflection_mm_reduced"]))

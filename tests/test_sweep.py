@@ -143,6 +143,7 @@ SHARDED = textwrap.dedent("""
 """)
 
 
+@pytest.mark.slow
 def test_sharded_over_four_devices_gives_identical_results():
     env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4",
                PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
@@ -218,3 +219,31 @@ def test_cli_sweep_bad_out_path(tmp_path, capsys):
     argv = ["sweep", "--wires", "3", "--length", "20", "--pitch-radius", "2", "--out"]
     assert main(argv + [str(tmp_path / "s.csv")]) == 2
     assert "must end in .npz" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_cli_sweep_32_wires_within_a_minute(tmp_path):
+    """Issue 14: 32 wires compiled for minutes (per-wire unrolling); now the program does not grow
+    with the wire count (test_metrics) and the chunk shrinks with it (default_chunk)."""
+    import time
+
+    from tension_zones.analysis._sweep import default_chunk
+
+    assert default_chunk(8) == 1 << 14 and default_chunk(32) == 1 << 10 and default_chunk(1000) == 256
+    out = tmp_path / "s32.npz"
+    t0 = time.perf_counter()
+    assert main(["sweep", "--wires", "32", "--length", "20", "--pitch-radius", "2", "--out", str(out),
+                 "--quiet"]) == 0
+    assert time.perf_counter() - t0 < 60
+    z = np.load(out)
+    assert z["dp_max_reduced"].shape == (18, 145) and np.all(np.isfinite(z["dp_max_reduced"]))
+    assert np.all(z["n_taut"][:, 1:-1] >= 15)  # about half of 32 even wires are taut
+    ref = pose_metrics_at(tz.Design(32, 20.0, 2.0), rad(z["theta_L_deg"][7, 33]), rad(z["delta_deg"][7, 33]))
+    for k, v in ref.items():
+        assert z[k][7, 33] == pytest.approx(float(v), rel=1e-12, abs=1e-15), k
+
+
+def pose_metrics_at(design, theta_L, delta):
+    from tension_zones.analysis._metrics import pose_metrics
+
+    return pose_metrics(design, theta_L, delta, 0.4)

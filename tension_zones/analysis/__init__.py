@@ -1,5 +1,20 @@
 """Analysis: single-pose performance measures and the sweep engine that evaluates them over grids."""
 
+from .. import _config  # noqa: F401  (float64 before any array is made)
 from ._metrics import DEFAULT_DQ, MEASURES, pose_measures, pose_metrics, zonogon_vertices
 from ._sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses
-from ._sweep import REDUCTIONS, sweep_designs  # issue 16
+from ._sweep import REDUCTIONS, sweep_designs
+
+__all__ = [
+    "DEFAULT_DQ",
+    "MEASURES",
+    "REDUCTIONS",
+    "compiled_chunk_count",
+    "grid_deg",
+    "pose_measures",
+    "pose_metrics",
+    "sweep_designs",
+    "sweep_grid",
+    "sweep_poses",
+    "zonogon_vertices",
+]

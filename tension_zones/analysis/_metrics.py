@@ -18,8 +18,20 @@ import functools
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._numerics import eps_of, gram_pinv_cols, keep, pinv_rows
+from .._numerics import (
+    cauchy_binet,
+    eps_of,
+    gram_pinv_cols,
+    keep,
+    per_wire,
+    pinv_rows,
+    unrolled,
+    wmap,
+    wstack,
+    wsum,
+)
 from ..model._design import Design
 from ..model._kinematics import J_xpsi_from_terms, J_xpsi_terms, _as_float
 from ..model._zones import mask_from_score
@@ -38,8 +50,9 @@ MODES = ("full", "reduced")
 # Guarded elementary functions (double-where: finite values *and* gradients at 0)
 # --------------------------------------------------------------------------------------------
 def _sqrt0(x):
-    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0."""
-    pos = x > 0
+    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0; NaN for NaN (``~(x <= 0)``, not
+    ``x > 0``: the same for numbers, and a NaN stays NaN instead of becoming a plausible 0)."""
+    pos = ~(x <= 0)
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
 
 
@@ -117,9 +130,18 @@ def zonogon_vertices(G):
     return jnp.stack([jnp.sum(coef * G[0], axis=1), jnp.sum(coef * G[1], axis=1)], axis=1)
 
 
-def _pose_inputs(design: Design, theta_L, delta):
+def _radius_or_nan(design: Design, dq):
+    """The pitch radius, or NaN for an invalid (traced) design or a non-finite ``dq``: once per
+    design, and every measure depends on it through ``P = pinv(J~_qpsi)``, so NaN in is NaN out at
+    no cost per pose (NaN poses and masks propagate by themselves: every guard here lets a NaN
+    through)."""
+    return jnp.where(design.invalid(), jnp.nan, design.pitch_radius) + 0.0 * jnp.asarray(dq)
+
+
+def _pose_inputs(design: Design, theta_L, delta, dq):
     """What every measure of one pose needs, computed once: ``J_xpsi`` (6, 2), the columns ``a``, ``b``
-    of ``J_qpsi`` and the tension scores ``cos(delta_k)`` (lists of n scalars).
+    of ``J_qpsi`` and the tension scores ``cos(delta_k)`` (per-wire values: lists of n scalars, or
+    (n,) arrays above :data:`~tension_zones._numerics.UNROLL_MAX_WIRES` wires).
 
     The sines and cosines are kept (:func:`~tension_zones._numerics.keep`): otherwise XLA:CPU
     re-evaluates them inside the loop of each of the 17 outputs. Same formulas as
@@ -134,14 +156,18 @@ def _pose_inputs(design: Design, theta_L, delta):
     terms = J_xpsi_terms(theta_L, delta, trig)
     # cos/sin(delta + alpha_k) by the addition theorem: the wires' angles are the design's, so their
     # sines and cosines are computed once per design, not per pose (2n fewer per pose)
-    ca, sa = jnp.cos(design.wire_angles), jnp.sin(design.wire_angles)
-    cos_k = [cd * ca[k] - sd * sa[k] for k in range(n)]
-    sin_k = [sd * ca[k] + cd * sa[k] for k in range(n)]
-    kept = keep(list(terms) + cos_k + sin_k, design.length)
-    terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
-    T, r = terms[0], design.pitch_radius
-    a = [r * c for c in cos_k]
-    b = [-r * T * s for s in sin_k]
+    ca, sa = per_wire(jnp.cos(design.wire_angles)), per_wire(jnp.sin(design.wire_angles))
+    cos_k = wmap(lambda c, s: cd * c - sd * s, ca, sa)
+    sin_k = wmap(lambda c, s: sd * c + cd * s, ca, sa)
+    if unrolled(n):
+        kept = keep(list(terms) + cos_k + sin_k, design.length)
+        terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
+    else:
+        kept = keep(list(terms) + [cos_k, sin_k], design.length)
+        terms, (cos_k, sin_k) = kept[:8], kept[8:]
+    T, r = terms[0], _radius_or_nan(design, dq)
+    a = wmap(lambda c: r * c, cos_k)
+    b = wmap(lambda s: -r * T * s, sin_k)
     return J_xpsi_from_terms(design.length, terms), a, b, cos_k
 
 
@@ -207,6 +233,51 @@ def _zonogon_vertices_cols(g0, g1):
     return plus + minus
 
 
+def _zonogon_max_sq(g0, g1, Jx):
+    """``(max |Jx[:3] v|^2, max |Jx[3:] v|^2)`` over the zonogon ``{G x : x in [-1, 1]^n}``,
+    generators ``G = [g0; g1]`` given as (n,) arrays: the many-wire form of
+    :func:`_zonogon_vertices_cols`.
+
+    Each generator is flipped into the upper half-plane (the zonogon does not change); in the order
+    of their angles the boundary from ``-sum g`` to ``+sum g`` steps through the partial sums
+    ``V_j = -sum g + 2 (g_(1) + ... + g_(j))``, and the other half is their negatives (same norms).
+    ``V_j`` is summed over the generators at or before ``j`` in that order (ties by index): (n, n)
+    comparisons that XLA fuses, faster under ``vmap`` on XLA:CPU than a sort. Parallel and zero
+    generators need no care: they only add points on an edge.
+    """
+    flip = (g1 < 0) | ((g1 == 0) & (g0 < 0))
+    h0, h1 = jnp.where(flip, -g0, g0), jnp.where(flip, -g1, g1)
+    den = jnp.abs(h0) + h1
+    # a pseudo-angle, increasing with the angle on [0, pi): no arctangent needed to order them
+    key = jax.lax.stop_gradient(jnp.where(den > 0, -h0 / jnp.where(den > 0, den, 1.0), 0.0))
+    idx = np.arange(g0.shape[0])
+    same, earlier = key[None, :] == key[:, None], idx[None, :] <= idx[:, None]
+    upto = (key[None, :] < key[:, None]) | (same & earlier)
+    v0 = 2.0 * jnp.sum(jnp.where(upto, h0[None, :], 0.0), axis=1) - jnp.sum(h0)
+    v1 = 2.0 * jnp.sum(jnp.where(upto, h1[None, :], 0.0), axis=1) - jnp.sum(h1)
+    dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
+    return (jnp.max(dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2]),
+            jnp.max(dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]))
+
+
+def _uncertainty_sq(P0, P1, dq, Jx):
+    """Squared ``(dp_max, dw_max)``: the largest ``|dx[:3]|^2``, ``|dx[3:]|^2`` of
+    ``dx = J_xpsi v`` over the vertices ``v`` of the zonogon ``P dq [-1, 1]^n`` (per-wire rows
+    ``P0``, ``P1`` of ``P``)."""
+    dq = jnp.asarray(dq, Jx.dtype)
+    g0, g1 = wmap(lambda x: x * dq, P0), wmap(lambda y: y * dq, P1)
+    if not isinstance(g0, list):  # many wires: (n,) arrays
+        return _zonogon_max_sq(g0, g1, Jx)
+    V = _zonogon_vertices_cols(g0, g1)
+    sq = [[0.0, 0.0] for _ in V]  # |dx[:3]|^2, |dx[3:]|^2 per vertex, dx = Jx v
+    for i, (v0, v1) in enumerate(V):
+        dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
+        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2],
+                 dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
+    return (functools.reduce(jnp.maximum, [q[0] for q in sq]),
+            functools.reduce(jnp.maximum, [q[1] for q in sq]))
+
+
 def _measures(Jx, blocks, a, b, dq, design):
     """Every measure of :func:`pose_measures` from :func:`_pose_inputs` (masked columns ``a``, ``b``)
     and the two blocks' :func:`_block_parts`; ``design`` for its wire count and as the anchor of
@@ -214,15 +285,17 @@ def _measures(Jx, blocks, a, b, dq, design):
     # rows of P = pinv(J~_qpsi) (2, n); zero columns for slack wires. pinv(G) first: kept, so that
     # its Gram matrix and determinant are not recomputed for each of P's 2n entries
     P0, P1 = pinv_rows(keep(gram_pinv_cols(a, b), design.length), a, b)
-    n = len(P0)
-    kept = keep(P0 + P1, design.length)  # shared by the 8 outputs below: computed once
-    P0, P1 = kept[:n], kept[n:]
-    # Cauchy-Binet over distinct column pairs (the diagonal is left out: under FMA it need not be
-    # exactly 0); exactly 0 with one non-zero column (one taut wire)
-    det_Gp = sum((P0[j] * P1[k] - P1[j] * P0[k]) ** 2 for j in range(n) for k in range(j + 1, n))
-    g00 = sum(x * x for x in P0)
-    g01 = sum(x * y for x, y in zip(P0, P1))
-    g11 = sum(y * y for y in P1)
+    n = design.n_wires
+    if unrolled(n):
+        kept = keep(P0 + P1, design.length)  # shared by the 8 outputs below: computed once
+        P0, P1 = kept[:n], kept[n:]
+    else:
+        P0, P1 = keep([P0, P1], design.length)
+    # Cauchy-Binet over distinct column pairs: exactly 0 with one non-zero column (one taut wire)
+    det_Gp = cauchy_binet(P0, P1)
+    g00 = wsum(wmap(lambda x: x * x, P0))
+    g01 = wsum(wmap(lambda x, y: x * y, P0, P1))
+    g11 = wsum(wmap(lambda y: y * y, P1))
     rtol = max(3, design.n_wires) * eps_of(Jx)
     out = {}
     for part, parts in zip("vw", blocks):
@@ -232,15 +305,10 @@ def _measures(Jx, blocks, a, b, dq, design):
         out[f"sigma_min_nz_{part}"] = jnp.where(s2 > rtol * s1, s2, s1)
     # Paper Eqs. 17-19 without the 3^n columns: the box maps to the zonogon P dq [-1, 1]^n in the
     # configuration space; a norm of J_xpsi z is convex in z, so its maximum is at a vertex.
-    dq = jnp.asarray(dq, P0[0].dtype)
-    V = _zonogon_vertices_cols([x * dq for x in P0], [y * dq for y in P1])
-    sq = [[0.0, 0.0] for _ in V]  # |dx[:3]|^2, |dx[3:]|^2 per vertex, dx = Jx v
-    for i, (v0, v1) in enumerate(V):
-        dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
-        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2], dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
     # sqrt is monotonic and correctly rounded: sqrt(max) == max(sqrt), one root instead of 2n
-    out["dp_max"] = _sqrt0(functools.reduce(jnp.maximum, [q[0] for q in sq]))
-    out["dw_max"] = _sqrt0(functools.reduce(jnp.maximum, [q[1] for q in sq]))
+    dp2, dw2 = _uncertainty_sq(P0, P1, dq, Jx)
+    out["dp_max"] = _sqrt0(dp2)
+    out["dw_max"] = _sqrt0(dw2)
     return out
 
 
@@ -256,7 +324,8 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         dq: joint-level uncertainty bound (mm), scalar; the box is ``dq [-1, 1]^n`` (paper Eq. 17).
         mask: ``None`` (traditional, all wires) or (n,) 0/1 taut mask (reduced, paper Sec. 3.3).
 
-    Returns a dict of scalars (the keys of :data:`MEASURES`):
+    Returns a dict of scalars (the keys of :data:`MEASURES`), every one NaN for a NaN (or
+    infinite) pose, ``dq`` or mask entry, or an invalid design (:meth:`Design.invalid`):
         ``kci_v``, ``kci_w``: ``sigma_2 / sigma_1`` of ``J_v = J_xq[:3]`` and ``J_w = J_xq[3:]``
         (0 when the rank is below 2); ``sigma_min_v`` (mm/mm), ``sigma_min_w`` (rad/mm):
         ``sigma_2``; ``sigma_min_nz_v``, ``sigma_min_nz_w``: the smallest *non-zero* singular value
@@ -264,14 +333,14 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         ``dp_max`` (mm), ``dw_max`` (rad): the largest ``||dx[:3]||`` and ``||dx[3:]||`` with
         ``dx = J_xpsi pinv(J~_qpsi) dq_vec`` over the box (paper Eqs. 17-19), exact.
     """
-    Jx, a, b, _ = _pose_inputs(design, theta_L, delta)
+    Jx, a, b, _ = _pose_inputs(design, theta_L, delta, dq)
     if mask is not None:
         mask = jnp.asarray(mask, Jx.dtype)
         if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
             raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
                              f"got {mask.shape}")
-        a = [x * mask[k] for k, x in enumerate(a)]
-        b = [y * mask[k] for k, y in enumerate(b)]
+        m = per_wire(mask)
+        a, b = wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m)
     blocks = _kept_blocks(Jx, design)
     return _measures(Jx, blocks, a, b, dq, design)
 
@@ -281,13 +350,16 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
 
     The keys are those of the ``tension-zones sweep`` file (``kci_v_full``, ``dp_max_reduced``, ...);
     ``n_taut`` is the number of wires in tension (MODEL.md Sec. 2, boundary rule included). The
-    reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`.
+    reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN
+    in, NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
     """
-    Jx, a, b, score = _pose_inputs(design, theta_L, delta)  # shared by both modes
-    mask = mask_from_score(jnp.stack(score))
-    out = {"n_taut": jnp.sum(mask > 0.5).astype(jnp.int32)}
+    Jx, a, b, score = _pose_inputs(design, theta_L, delta, dq)  # shared by both modes
+    mask = mask_from_score(wstack(score))
+    bad = ~jnp.isfinite(theta_L + delta + _radius_or_nan(design, dq))  # cheap: no measure in it
+    out = {"n_taut": jnp.where(bad, -1, jnp.sum(mask > 0.5)).astype(jnp.int32)}
     blocks = _kept_blocks(Jx, design)
-    reduced = ([x * mask[k] for k, x in enumerate(a)], [y * mask[k] for k, y in enumerate(b)])
+    m = per_wire(mask)
+    reduced = (wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m))
     for mode, (aa, bb) in (("full", (a, b)), ("reduced", reduced)):
         for k, v in _measures(Jx, blocks, aa, bb, dq, design).items():
             out[f"{k}_{mode}"] = v

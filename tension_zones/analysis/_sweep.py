@@ -36,6 +36,15 @@ from ..model._design import Design
 
 #: Poses per chunk and device: 2^14 keeps the working set of the kinematic measures near 50 MB.
 DEFAULT_CHUNK = 1 << 14
+
+
+def default_chunk(n_wires: int) -> int:
+    """Poses per chunk for a wire count: :data:`DEFAULT_CHUNK` up to 8 wires; above, where the
+    measures take (n, n) pair terms per pose, smaller by ``(8 / n)^2`` (a power of two, at least
+    256), so that the working set stays near its 8-wire size (64 wires at 2^14 poses: 2.6 GB)."""
+    if n_wires <= 8:
+        return DEFAULT_CHUNK
+    return max(256, DEFAULT_CHUNK >> (2 * math.ceil(math.log2(n_wires / 8))))
 #: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
 #: and third chunk in flight keep both cores busy (one program alone runs on about one core).
 IN_FLIGHT = 3
@@ -46,12 +55,16 @@ def grid_deg(stop: float, step: float, start: float = 0.0) -> np.ndarray:
 
     ``grid_deg(85, 5)`` is 0, 5, ..., 85 (18 values); ``grid_deg(360, 2.5)`` is 0, ..., 360 (145).
     """
+    return start + step * np.arange(grid_size(stop, step, start), dtype=float)
+
+
+def grid_size(stop: float, step: float, start: float = 0.0) -> int:
+    """The number of values of :func:`grid_deg` (checked without building the grid)."""
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"a grid step must be a positive number of degrees, got {step}")
     if not (math.isfinite(start) and math.isfinite(stop)) or stop < start:
         raise ValueError(f"a grid needs start <= stop, got {start} .. {stop}")
-    count = int(math.floor((stop - start) / step + 1e-9)) + 1
-    return start + step * np.arange(count, dtype=float)
+    return int(math.floor((stop - start) / step + 1e-9)) + 1
 
 
 def _eval_chunk(fn, design, theta_L, delta, args):
@@ -116,6 +129,8 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     on the device; results flat (N, ...)."""
     if not isinstance(design, Design):
         raise TypeError(f"design must be a tension_zones.Design, got {type(design).__name__}")
+    if chunk_size is None:
+        chunk_size = default_chunk(design.n_wires)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     mesh, n_dev = _mesh(devices)
@@ -199,7 +214,7 @@ def sweep_poses(
     theta_L,
     delta,
     *args,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     devices: Sequence | None = None,
     quiet: bool = False,
     keep: Sequence[str] | None = None,
@@ -212,7 +227,8 @@ def sweep_poses(
         design: the segment (its values are traced: new values reuse the compiled code).
         theta_L, delta: (N,) poses in rad.
         *args: extra arguments shared by all poses (traced, e.g. ``dq``).
-        chunk_size: poses per device and compiled call (a chunk is ``chunk_size`` x devices).
+        chunk_size: poses per device and compiled call (a chunk is ``chunk_size`` x devices);
+            ``None``: :func:`default_chunk` of the wire count.
         devices: devices to shard each chunk's pose axis over (default: all local devices).
         quiet: no progress bar.
         keep: names of the outputs to keep (default: all).
@@ -233,7 +249,7 @@ def sweep_grid(
     theta_L,
     delta,
     *args,
-    chunk_size: int = DEFAULT_CHUNK,
+    chunk_size: int | None = None,
     devices: Sequence | None = None,
     quiet: bool = False,
     keep: Sequence[str] | None = None,
@@ -260,7 +276,7 @@ def sweep_grid(
 
 
 # ------------------------------------------------------------------------------------------------
-# Many designs at once: per-design statistics over one grid (issue 16)
+# Many designs at once: per-design statistics over one grid
 # ------------------------------------------------------------------------------------------------
 #: Designs per compiled call of :func:`sweep_designs`: the unit of progress, of the work a process
 #: takes and of what a resumed exploration keeps (about 0.1-0.3 s of work on the paper's grid).

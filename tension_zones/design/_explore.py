@@ -1,4 +1,4 @@
-"""Design-space exploration (issue 16): many designs x a workspace grid -> per-design statistics.
+"""Design-space exploration: many designs x a workspace grid -> per-design statistics.
 
 For every design of a :class:`~tension_zones.design.Space` (one batch and one compiled program per
 wire count), the workspace statistics of :data:`STATS` over the space's grid, computed by

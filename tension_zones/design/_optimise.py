@@ -1,4 +1,4 @@
-"""Design optimiser (issue 5): wire count, pitch radius, wire stiffness and wire placement.
+"""Design optimiser: wire count, pitch radius, wire stiffness and wire placement.
 
 Objective for one wire count ``n`` (all terms over the scenario's task grid of poses):
 
@@ -8,12 +8,17 @@ with ``dp_max_reduced`` the reduced-Jacobian position-uncertainty bound (paper S
 ``|dx|_reduced`` the reduced compliance deflection under the scenario's load (paper Sec. 5).
 
 **Controllability is a constraint.** The pinv-based bound rewards slack wires (a direction nobody
-actuates drops out of ``pinv``), so a design is feasible only if at every task pose the taut wires
-span the configuration space: ``spread >= min_spread`` where ``spread`` is the smallest singular
-value of the taut wires' unit vectors ``[cos delta_k, sin delta_k]``, checked exactly over the
-task's continuous range of bending directions (grid directions plus every zone boundary inside
-the range, see :func:`_range_spread`), so a design cannot pass by dodging the grid. It enters the optimisation
-as a quadratic penalty through the straight-through tension masks, and violations are reported.
+actuates drops out of ``pinv``), so a design is feasible only if over the task's range of bending
+directions the taut wires span the configuration space: ``spread >= min_spread`` where ``spread``
+is the smallest singular value of the taut wires' unit vectors ``[cos delta_k, sin delta_k]``,
+checked exactly over the continuous range (it is constant on each sector of constant taut set), so
+a design cannot pass by dodging the grid. By default only sectors of finite width count: the
+isolated directions where a wire sits exactly on its zone boundary (four even wires: the lines
+through a wire) are reported (``zero_width_directions_deg``), not violations; the scenario key
+``strict_controllability`` counts them too (the grid directions and every zone boundary, see
+:func:`_range_spread`). The rule and its reasons: ``README.md`` beside this module. It enters the
+optimisation as a quadratic penalty through the straight-through tension masks, and violations are
+reported.
 
 Variables map onto the feasible set exactly: the pitch radius and wire stiffness are box variables
 scaled to [0, 1] and projected after every step (their bounds already include the outer-diameter
@@ -141,6 +146,7 @@ class _Task:
     min_spread: jax.Array
     delta_lo: jax.Array  # the task's continuous range of bending directions (rad)
     delta_span: jax.Array
+    strict: jax.Array  # bool: directions of zero width count as violations too
 
 
 jax.tree_util.register_dataclass(
@@ -173,8 +179,14 @@ def zone_boundaries(design: Design):
     return jnp.concatenate([-a + jnp.pi / 2, -a - jnp.pi / 2])
 
 
+#: Sectors of constant taut set no wider than this (rad) are single directions: zone boundaries that
+#: coincide up to rounding (four even wires: wire k's end and wire k + 2's start).
+ZERO_WIDTH_RAD = 1e-9
+
+
 def _range_spread(design: Design, task: _Task):
-    """Spread at the task grid's directions and at every zone boundary inside the task's range.
+    """Spread at the task grid's directions and at every zone boundary inside the task's range
+    (the strict rule: every direction, zero width included).
 
     The spread is invariant to rotating all wires, so along delta it only changes where the taut
     set does; at a boundary the boundary wire is slack (MODEL.md rule), the taut set is the
@@ -188,11 +200,41 @@ def _range_spread(design: Design, task: _Task):
     return jnp.concatenate([on_grid, jnp.where(inside, at_bnd, jnp.inf)])
 
 
+def _sector_spread(design: Design, task: _Task):
+    """Spread on every sector of finite width that overlaps the task's range with finite width
+    (the default rule), ``inf`` for the others; (2n,).
+
+    The 2n zone boundaries cut the circle into sectors of constant taut set, so the spread is
+    constant on each and is taken at its middle. Sectors of zero width (coinciding boundaries:
+    single directions) and sectors that touch the range only at an end are left out.
+    """
+    start = jnp.sort(jnp.mod(zone_boundaries(design), 2 * jnp.pi))
+    width = jnp.concatenate([start[1:], start[:1] + 2 * jnp.pi]) - start
+    rel = jnp.mod(start - task.delta_lo, 2 * jnp.pi)  # the sector's start, from the range's start
+    tol = ZERO_WIDTH_RAD
+    overlaps = (rel < task.delta_span - tol) | (rel + width > 2 * jnp.pi + tol)
+    at_mid = jax.vmap(lambda d: spread(design, d))(start + 0.5 * width)
+    return jnp.where((width > ZERO_WIDTH_RAD) & overlaps, at_mid, jnp.inf)
+
+
+def _controllability(design: Design, task: _Task):
+    """``(penalty, violations, smallest spread)`` of the rule the task asks for (``task.strict``):
+    the mean squared shortfall below ``min_spread``, the number of checked directions or sectors
+    below it, and the smallest spread checked. A task range of zero width (one direction) is
+    always checked strictly: that direction is all the task needs."""
+    results = []
+    for spr in (_range_spread(design, task), _sector_spread(design, task)):
+        viol = jnp.maximum(task.min_spread - spr, 0.0)  # 0 for unchecked entries (inf)
+        results.append((jnp.mean(viol**2), jnp.sum(spr < task.min_spread), jnp.min(spr)))
+    strict = task.strict | (task.delta_span <= ZERO_WIDTH_RAD)
+    return tuple(jnp.where(strict, a, b) for a, b in zip(*results))
+
+
 def _grid_terms(design: Design, task: _Task, with_defl: bool = True):
-    """Per-pose terms on the task grid, each (n_theta, n_delta), and the spread over the range."""
+    """Per-pose terms on the task grid, each (n_theta, n_delta), and the controllability check."""
     inner = jax.vmap(lambda t, d: _pose_terms(design, t, d, task, with_defl), in_axes=(None, 0))
     dp, defl, ok = jax.vmap(inner, in_axes=(0, None))(task.theta_L, task.delta)
-    return dp, defl, ok, _range_spread(design, task)
+    return dp, defl, ok, _controllability(design, task)
 
 
 def _smooth_max(x, sharpness):
@@ -209,26 +251,50 @@ def _smooth_max(x, sharpness):
 
 def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool = True):
     """(smooth objective for gradients, exact objective, exact pieces)."""
-    dp, defl, ok, spr = _grid_terms(design, task, with_defl)
-    viol = jnp.maximum(task.min_spread - spr, 0.0)  # 0 for boundaries outside the range (inf)
+    dp, defl, ok, (shortfall, violations, min_spread) = _grid_terms(design, task, with_defl)
     # poses the wires cannot hold without pushing count as a controllability violation too
-    penalty = SPREAD_PENALTY * (jnp.mean(viol**2) + jnp.mean(1.0 - ok))
+    penalty = SPREAD_PENALTY * (shortfall + jnp.mean(1.0 - ok))
     wire_cost = task.w_wires * n
     smooth = (task.w_position * _smooth_max(dp, sharpness)
               + task.w_deflection * _smooth_max(defl, sharpness) + wire_cost + penalty)
     worst_dp, worst_defl = jnp.max(dp), jnp.max(defl)
     exact = task.w_position * worst_dp + task.w_deflection * worst_defl + wire_cost
-    pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=jnp.min(spr),
-                  violations=jnp.sum(spr < task.min_spread),
-                  statics_infeasible=jnp.sum(~ok))
+    pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=min_spread,
+                  violations=violations, statics_infeasible=jnp.sum(~ok))
     return smooth, exact, pieces
+
+
+#: :func:`_objective`, compiled once per wire count and task shape (not once per call).
+_objective_jit = jax.jit(_objective, static_argnums=(2, 4))
 
 
 def _task(sc: Scenario) -> _Task:
     f = lambda x: jnp.asarray(x, float)  # noqa: E731
-    span = min(float(sc.delta[-1] - sc.delta[0]), 2 * math.pi)
     return _Task(f(sc.theta_L), f(sc.delta), f(sc.dq), f(sc.load), f(sc.w_position),
-                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]), f(span))
+                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]),
+                 f(_span(sc)), jnp.asarray(sc.strict_controllability))
+
+
+def _span(sc: Scenario) -> float:
+    """Width (rad) of the task's range of bending directions, at most a full circle."""
+    return min(float(sc.delta[-1] - sc.delta[0]), 2 * math.pi)
+
+
+def zero_width_directions(sc: Scenario, design: Design) -> list[float]:
+    """The single directions (deg, in [0, 360)) inside the task's range where controllability is
+    lost on zero width: point sectors of the design's tension map (a taut set that neither
+    neighbouring sector has) whose spread is below ``min_spread``. Not violations by default
+    (reported in ``result.json``); violations with ``strict_controllability``."""
+    from ..model._zones import tension_map
+
+    lo, span = math.degrees(float(sc.delta[0])), math.degrees(_span(sc))
+    out = []
+    for s in tension_map(design).sectors:
+        p = s.start_deg % 360.0
+        in_range = s.width_deg == 0 and (p - lo) % 360.0 <= span + 1e-9
+        if in_range and float(spread(design, math.radians(p))) < sc.min_spread:
+            out.append(round(p, 9))
+    return sorted(set(out))
 
 
 def _arc_slack(sc: Scenario, n: int, r: float) -> float:
@@ -320,7 +386,7 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
 
 def _evaluate(z, bounds, task, base, n, free, arc, with_defl):
     d = _design(z, bounds, n, free, arc, base)
-    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(d, task, n, 1.0, with_defl)
+    _, exact, pieces = _objective_jit(d, task, n, 1.0, with_defl)
     return d, exact, pieces
 
 
@@ -341,7 +407,7 @@ def _initial(sc: Scenario, n: int, key) -> dict:
     return z
 
 
-def _result_row(n, d: Design, exact, pieces) -> dict[str, Any]:
+def _result_row(sc: Scenario, n, d: Design, exact, pieces) -> dict[str, Any]:
     return {
         "n_wires": n,
         "pitch_radius_mm": float(d.pitch_radius),
@@ -352,6 +418,7 @@ def _result_row(n, d: Design, exact, pieces) -> dict[str, Any]:
         "worst_deflection_mm": float(pieces["worst_defl"]),
         "min_spread": float(pieces["min_spread"]),
         "spread_violations": int(pieces["violations"]),
+        "zero_width_directions_deg": zero_width_directions(sc, d),
         "statics_infeasible_poses": int(pieces["statics_infeasible"]),
         "feasible": bool(int(pieces["violations"]) == 0 and int(pieces["statics_infeasible"]) == 0),
     }
@@ -387,12 +454,13 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
         i = int(jnp.argmin(best))
         z = jax.tree_util.tree_map(lambda a: a[i], best_z)
         d, exact, pieces = _evaluate(z, bounds, task, base, n, free, arc, sc.w_deflection > 0)
-        rows.append(_result_row(n, d, exact, pieces))
+        rows.append(_result_row(sc, n, d, exact, pieces))
         hist[str(n)] = np.asarray(h[i]).tolist()
     feasible = [r for r in rows if r.get("feasible")]
     best_row = min(feasible, key=lambda r: r["objective"]) if feasible else None
     return {
         "best": best_row,
+        "strict_controllability": sc.strict_controllability,
         "per_wire_count": rows,
         "seconds": time.perf_counter() - t0,
         "evaluations": evaluations,
@@ -403,22 +471,30 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
 def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     """The exact objective and its pieces for a given design under a scenario (e.g. to check a
     hand-made design, or the evenly spaced one, against the constraints)."""
-    _, exact, pieces = jax.jit(_objective, static_argnums=(2, 4))(
+    _, exact, pieces = _objective_jit(
         design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
-    return _result_row(design.n_wires, design, exact, pieces)
+    return _result_row(sc, design.n_wires, design, exact, pieces)
+
+
+#: The files :func:`write_outputs` writes into its folder.
+OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
 
 
 def write_outputs(result: dict[str, Any], out_dir) -> list:
-    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``."""
+    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``; each file
+    appears complete or not at all (:func:`tension_zones._io.atomic_path`)."""
     import json
     from pathlib import Path
 
+    from .._io import atomic_path, write_text
     from ..plots import plot_convergence, plot_tradeoff
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "result.json", out / "tradeoff.png", out / "convergence.png"]
-    paths[0].write_text(json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
-    plot_tradeoff(result, paths[1])
-    plot_convergence(result, paths[2], INFEASIBLE_RANK)
+    paths = [out / name for name in OUTPUT_FILES]
+    write_text(paths[0], json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
+    with atomic_path(paths[1]) as tmp:
+        plot_tradeoff(result, tmp)
+    with atomic_path(paths[2]) as tmp:
+        plot_convergence(result, tmp, INFEASIBLE_RANK)
     return paths

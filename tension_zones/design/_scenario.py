@@ -36,6 +36,7 @@ DEFAULTS: dict[str, Any] = {
         "min_wire_gap_mm": 0.2,
     },
     "min_spread": 0.25,
+    "strict_controllability": False,
     "forbidden_arc_deg": None,
     "optimizer": {"starts": 4, "steps": 300, "learning_rate": 0.05, "sharpness": 30.0, "seed": 0},
 }
@@ -58,6 +59,9 @@ DOC: dict[str, str] = {
                    "outer wall), min_wire_gap_mm (between neighbouring wire holes)",
     "min_spread": "controllability: at every task pose the smallest singular value of the taut wires' "
                   "unit vectors [cos delta_k, sin delta_k] must be at least this (0..1)",
+    "strict_controllability": "false: controllability lost only on single directions (zero "
+                              "width, e.g. exactly along a wire of four even wires) is reported, "
+                              "not a violation; true: every direction counts",
     "forbidden_arc_deg": "null, or [start, end] (deg, counter-clockwise from x_b) of an arc no wire "
                          "may occupy (e.g. a tool channel); needs free_wire_angles",
     "optimizer": "starts (random restarts), steps (Adam steps per start), learning_rate, sharpness "
@@ -88,6 +92,7 @@ class Scenario:
     min_wall: float
     min_wire_gap: float
     min_spread: float
+    strict_controllability: bool
     forbidden_arc: tuple[float, float] | None
     starts: int
     steps: int
@@ -195,8 +200,9 @@ def parse_scenario(d: dict) -> Scenario:
         if not s["free_wire_angles"]:
             raise _err("forbidden_arc_deg", "needs free_wire_angles: true")
         arc = (math.radians(a0), math.radians(a0 + width))
-    if not isinstance(s["free_wire_angles"], bool):
-        raise _err("free_wire_angles", f"must be true or false, got {s['free_wire_angles']!r}")
+    for k in ("free_wire_angles", "strict_controllability"):
+        if not isinstance(s[k], bool):
+            raise _err(k, f"must be true or false, got {s[k]!r}")
     for k in ("starts", "steps", "seed"):
         if isinstance(o[k], bool) or not isinstance(o[k], int) or o[k] < (0 if k == "seed" else 1):
             raise _err(f"optimizer.{k}", f"must be a positive integer, got {o[k]!r}")
@@ -224,6 +230,7 @@ def parse_scenario(d: dict) -> Scenario:
         min_wall=_num("constraints.min_wall_mm", c["min_wall_mm"], 0.0),
         min_wire_gap=_num("constraints.min_wire_gap_mm", c["min_wire_gap_mm"], 0.0),
         min_spread=_num("min_spread", s["min_spread"], 0.0, 1.0),
+        strict_controllability=s["strict_controllability"],
         forbidden_arc=arc,
         starts=o["starts"],
         steps=o["steps"],

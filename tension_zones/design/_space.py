@@ -1,4 +1,4 @@
-"""Design spaces for exploration (issue 16): the JSON a designer writes, parsed and validated.
+"""Design spaces for exploration: the JSON a designer writes, parsed and validated.
 
 A space gives each design field a fixed value, a range ``[min, max]`` or a list
 ``{"values": [...]}``, the wire counts (one compiled program each), how to sample (a full grid with

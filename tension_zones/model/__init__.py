@@ -4,7 +4,16 @@ Constant-curvature kinematics written once per segment (``_kinematics``) and cha
 tension zones and masks (``_zones``); tension-only statics and compliance (``_statics``).
 """
 
-from ._design import DEFAULT_BACKBONE_EI, DEFAULT_WIRE_STIFFNESS, Design, read_json
+from .. import _config  # noqa: F401  (float64 before any array is made)
+from ._design import (
+    DEFAULT_BACKBONE_EI,
+    DEFAULT_WIRE_STIFFNESS,
+    PHYSICAL_KEYS,
+    Design,
+    MissingDesignKeyWarning,
+    missing_physical_keys,
+    read_json,
+)
 from ._kinematics import (
     THETA_0,
     J_qb,
@@ -59,3 +68,60 @@ from ._equilibrium import (
     wire_tensions,
 )
 from ._robot import Robot, Structure
+
+__all__ = [
+    "BOUNDARY_TOL",
+    "Load",
+    "Robot",
+    "Structure",
+    "energy",
+    "equilibrium",
+    "equilibrium_J_pq",
+    "forward",
+    "wire_stretch",
+    "wire_tensions",
+    "DEFAULT_BACKBONE_EI",
+    "DEFAULT_WIRE_STIFFNESS",
+    "PAPER_DELTA_DEG",
+    "PAPER_THETA_L_DEG",
+    "PAPER_WRENCH",
+    "PHYSICAL_KEYS",
+    "TEMPERATURE",
+    "THETA_0",
+    "Design",
+    "J_qb",
+    "J_qpsi",
+    "J_xb",
+    "J_xpsi",
+    "J_xq",
+    "MissingDesignKeyWarning",
+    "Sector",
+    "TensionMap",
+    "TensionSolution",
+    "as_wrench",
+    "b_to_psi",
+    "compliance",
+    "compliance_grid",
+    "compliance_pose",
+    "compliance_pose_jit",
+    "jacobians",
+    "mask_from_score",
+    "min_norm_tensions",
+    "missing_physical_keys",
+    "over_grid",
+    "psi_to_b",
+    "read_json",
+    "reduced_J_qpsi",
+    "reduced_J_xq",
+    "stiffness_b",
+    "stiffness_psi",
+    "taut_mask",
+    "tension_map",
+    "tension_mask",
+    "tension_score",
+    "tensions",
+    "tip_pose",
+    "tip_pose_b",
+    "wire_lengths",
+    "wire_lengths_b",
+]

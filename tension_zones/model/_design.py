@@ -8,8 +8,10 @@ changing a value (a new pitch radius, other wire angles) never triggers a recomp
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -45,8 +47,12 @@ class Design:
         backbone_EI: bending stiffness of the backbone (N mm^2), >= 0.
         preload: wire preload ``f_min`` (N), >= 0.
 
-    Invalid values raise ``ValueError`` naming the field and the value. Validation runs on concrete
-    values only; pytree reconstruction inside ``jit``/``vmap`` bypasses it.
+    Invalid values raise ``ValueError`` naming the field and the value. That check needs concrete
+    values: a design built inside ``jit``/``vmap`` (traced values) or rebuilt from its leaves is not
+    checked when built. Its values are checked where they are used instead: :meth:`invalid` is the
+    same rule on traced values, and every measure (``pose_measures``, ``pose_metrics``,
+    ``compliance_pose``, ``tension_score``, ``tension_mask``) is NaN (counts -1, flags False) for an
+    invalid design, as for NaN inputs: never a plausible number.
     """
 
     n_wires: int
@@ -124,6 +130,17 @@ class Design:
         """The same design with every leaf cast to ``dtype`` (e.g. ``jnp.float32``)."""
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x, dtype), self)
 
+    def invalid(self) -> jax.Array:
+        """Whether a value is outside its domain (the constructor's rule, on traced values too):
+        ``length``, ``pitch_radius``, ``wire_stiffness`` not finite and positive, ``backbone_EI`` or
+        ``preload`` not finite and non-negative, or a wire angle not finite. A boolean scalar (one
+        per design of a ``vmap``-ed family); coincident wires are left to the constructor."""
+        positive = (self.length, self.pitch_radius, self.wire_stiffness)
+        pos = [jnp.isfinite(x) & (x > 0) for x in positive]
+        nonneg = [jnp.isfinite(x) & (x >= 0) for x in (self.backbone_EI, self.preload)]
+        ok = functools.reduce(jnp.logical_and, pos + nonneg)
+        return ~(ok & jnp.all(jnp.isfinite(self.wire_angles), axis=-1))
+
     @property
     def wire_angles_deg(self) -> np.ndarray:
         return np.degrees(np.asarray(self.wire_angles))
@@ -141,26 +158,32 @@ class Design:
         }
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Design:
-        """Build from a design-file dictionary (MODEL.md Sec. 6); unknown keys are an error."""
-        keys = {
-            "n_wires": "n_wires",
-            "length_mm": "length",
-            "pitch_radius_mm": "pitch_radius",
-            "wire_stiffness_N_per_mm": "wire_stiffness",
-            "backbone_EI_Nmm2": "backbone_EI",
-            "preload_N": "preload",
-            "wire_angles_deg": "wire_angles",
-        }
+    def from_dict(cls, d: dict[str, Any], warn_missing: bool = False) -> Design:
+        """Build from a design-file dictionary (MODEL.md Sec. 6).
+
+        Every error is one ``ValueError`` line naming the file's key and what it expects (an unknown
+        key, a string, a bool or a fractional ``n_wires``, an entry of the wrong type). Keys that
+        are left out take the constructor's defaults; with ``warn_missing=True`` a
+        :class:`MissingDesignKeyWarning` names the physical ones among them
+        (:data:`PHYSICAL_KEYS`, see :func:`missing_physical_keys`): a calibration would otherwise
+        start from, and may "find", a default it was never told.
+        """
         if not isinstance(d, dict):
             raise ValueError(f"a design file must hold a JSON object, got {type(d).__name__}")
-        unknown = sorted(set(d) - set(keys))
+        unknown = sorted(set(d) - set(_FILE_KEYS))
         if unknown:
-            raise ValueError(f"unknown design key(s) {unknown}; known: {sorted(keys)}")
+            raise ValueError(f"unknown design key(s) {unknown}; known: {sorted(_FILE_KEYS)}")
         for required in ("length_mm", "pitch_radius_mm"):
             if required not in d:
                 raise ValueError(f"design is missing the key {required!r}")
-        kw = {keys[k]: v for k, v in d.items()}
+        for key, value in d.items():
+            if key == "n_wires":
+                _check_count(value)
+            elif key == "wire_angles_deg":
+                _check_number_list(key, value)
+            else:
+                _check_scalar(key, value, _FILE_KEYS[key])
+        kw = {_FILE_KEYS[k]: v for k, v in d.items()}
         angles = kw.get("wire_angles")
         if "n_wires" not in kw:
             if angles is None:
@@ -169,11 +192,23 @@ class Design:
         if angles is not None:
             _check_angles(angles, kw["n_wires"], field="wire_angles_deg")
             kw["wire_angles"] = np.radians(np.asarray(angles, dtype=float))
-        return cls(**kw)
+        design = cls(**kw)
+        missing = missing_physical_keys(d) if warn_missing else []
+        if missing:
+            used = {"wire_stiffness_N_per_mm": design.wire_stiffness,
+                    "backbone_EI_Nmm2": design.backbone_EI, "preload_N": design.preload}
+            named = ", ".join(f"{k!r} (default {float(used[k]):g} used)" for k in missing)
+            warnings.warn(f"design leaves out {named}", MissingDesignKeyWarning, stacklevel=2)
+        return design
 
     @classmethod
-    def from_json(cls, path) -> Design:
-        return cls.from_dict(read_json(path, "design file"))
+    def from_json(cls, path, warn_missing: bool = False) -> Design:
+        """:meth:`from_dict` of a JSON file; errors name the file."""
+        d = read_json(path, "design file")
+        try:
+            return cls.from_dict(d, warn_missing=warn_missing)
+        except ValueError as e:
+            raise ValueError(f"design file {str(path)!r}: {e}") from None
 
     def __repr__(self) -> str:
         if not all(_is_concrete(getattr(self, f)) for f in _DATA_FIELDS):
@@ -192,23 +227,80 @@ class Design:
 
 jax.tree_util.register_pytree_node(Design, Design._tree_flatten, Design._tree_unflatten)
 
+#: Design-file keys (MODEL.md Sec. 6) -> :class:`Design` fields.
+_FILE_KEYS = {
+    "n_wires": "n_wires",
+    "length_mm": "length",
+    "pitch_radius_mm": "pitch_radius",
+    "wire_stiffness_N_per_mm": "wire_stiffness",
+    "backbone_EI_Nmm2": "backbone_EI",
+    "preload_N": "preload",
+    "wire_angles_deg": "wire_angles",
+}
+#: The physical keys a design file may leave out (they then take the defaults): what a calibration
+#: must be told rather than assume.
+PHYSICAL_KEYS = ("wire_stiffness_N_per_mm", "backbone_EI_Nmm2", "preload_N")
+
+
+class MissingDesignKeyWarning(UserWarning):
+    """A design file left out a physical key (:data:`PHYSICAL_KEYS`) and its default was used."""
+
+
+def missing_physical_keys(d: dict[str, Any]) -> list[str]:
+    """The keys of :data:`PHYSICAL_KEYS` a design-file dictionary leaves out (defaults taken)."""
+    return [k for k in PHYSICAL_KEYS if k not in d]
+
 
 def read_json(path, what: str):
-    """A JSON file's content; a missing or malformed file is a ValueError naming it (``what``)."""
+    """A JSON file's content; a missing, unreadable or malformed file is a ValueError naming it
+    (``what``). A UTF-8 byte-order mark is allowed."""
     path = Path(path)
     try:
-        return json.loads(path.read_text())
+        return json.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise ValueError(f"{what} {str(path)!r} does not exist") from None
     except IsADirectoryError:
         raise ValueError(f"{what} {str(path)!r} is a folder, not a file") from None
+    except UnicodeDecodeError as e:
+        raise ValueError(f"{what} {str(path)!r} is not UTF-8 text (byte {e.start})") from None
     except json.JSONDecodeError as e:
         raise ValueError(f"{what} {str(path)!r} is not valid JSON: {e}") from None
 
 
-def _check_scalar(name: str, value) -> None:
+def _what(value) -> str:
+    """A value for an error message, with its JSON type where the type is the problem."""
+    if value is None:
+        return "null"
+    kind = {bool: "a boolean", str: "a string", list: "a list", dict: "an object"}.get(type(value))
+    return f"{value!r} ({kind})" if kind else repr(value)
+
+
+def _check_count(value) -> None:
+    """``n_wires`` from a file: an integer (not a bool, string or fractional number)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        msg = f"n_wires must be an integer of at least 3, got {_what(value)}"
+        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+
+
+def _check_number_list(key: str, value) -> None:
+    """A list of numbers from a file (no strings, booleans, nulls or nested lists)."""
+    if not isinstance(value, (list, tuple)):
+        msg = f"{key} must be a list of numbers, got {_what(value)}"
+        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+    for i, v in enumerate(value):
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            msg = f"{key}[{i}] must be a number, got {_what(v)}"
+            raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+
+
+def _check_scalar(name: str, value, field: str | None = None) -> None:
+    """A scalar ``field`` (default: ``name``) in its domain; messages say ``name`` (a file key)."""
     if not _is_concrete(value):
         return
+    field = field or name
+    if isinstance(value, (bool, np.bool_, str, type(None), list, tuple, dict)):
+        msg = f"{name} must be a number, got {_what(value)}"
+        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
@@ -218,9 +310,9 @@ def _check_scalar(name: str, value) -> None:
     v = float(arr)
     if not math.isfinite(v):
         raise ValueError(f"{name} must be finite, got {v}")
-    if name in ("length", "pitch_radius", "wire_stiffness") and v <= 0:
+    if field in ("length", "pitch_radius", "wire_stiffness") and v <= 0:
         raise ValueError(f"{name} must be positive, got {v}")
-    if name in ("backbone_EI", "preload") and v < 0:
+    if field in ("backbone_EI", "preload") and v < 0:
         raise ValueError(f"{name} must be non-negative, got {v}")
 
 
@@ -232,7 +324,8 @@ def _check_angles(angles, n_wires: int, field: str = "wire_angles") -> None:
     except (TypeError, ValueError):
         raise ValueError(f"{field} must be a list of numbers, got {angles!r}") from None
     if a.ndim != 1 or a.shape[0] != n_wires:
-        raise ValueError(f"{field} must have n_wires = {n_wires} entries, got shape {a.shape}")
+        got = f"{a.shape[0]} entries" if a.ndim == 1 else f"shape {a.shape}"
+        raise ValueError(f"{field} must have n_wires = {n_wires} entries, got {got}")
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{field} must be finite, got {a.tolist()}")
     full = 360.0 if field.endswith("deg") else 2 * np.pi

@@ -24,7 +24,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import eps_of, keep, pinv_tall2, pinv_tall2_cols, straight_through
+from .._numerics import (
+    eps_of,
+    keep,
+    nan_where,
+    not_finite,
+    per_wire,
+    pinv_tall2,
+    pinv_tall2_cols,
+    straight_through,
+    wmap,
+    wmax,
+    wstack,
+    wsum,
+)
 from ._design import Design
 from ._kinematics import J_qb, J_qpsi, J_xb, J_xb_cols, J_xpsi, bend_coeffs, over_grid, psi_to_b
 
@@ -84,6 +97,10 @@ def _free_sets(n: int) -> np.ndarray:
 #: Up to this many candidate free sets (``2^n``: n <= 4 wires) the set choice is unrolled (fast to run,
 #: slower to compile, and much slower beyond: 30 s for 8 wires); above it is vectorised over the sets.
 _UNROLL_MAX_SETS = 16
+#: Up to this many wires the free set is chosen among all 2^n subsets (exact for any ``A``); above
+#: it among the O(n^2) runs of wires of :func:`_arc_free_mask` (2^n is 81 s per 16k-pose chunk at
+#: 16 wires and 4e9 sets at 32).
+MAX_SUBSET_WIRES = 8
 
 
 def _choose_free_set(A, rhs, f_min):
@@ -135,6 +152,82 @@ def _choose_free_set(A, rhs, f_min):
     return best_j
 
 
+def _arc_runs(n: int):
+    """Starts and lengths (static, NumPy) of the candidate free sets of :func:`_arc_free_mask`: the
+    empty set, then every run of ``m = 1..n`` wires consecutive in angular order from every
+    start."""
+    m, s = np.meshgrid(np.arange(1, n + 1), np.arange(n), indexing="ij")
+    return np.concatenate([[0], s.ravel()]), np.concatenate([[0], m.ravel()])
+
+
+def _arc_free_mask(A, rhs, f_min):
+    """The free set of the QP's solution, (n,) 0/1, for many wires: ``O(n^2)`` candidates, not
+    ``2^n``.
+
+    A wire is free when ``a_k . lam > f_min``. With ``a_k = rho (cos b_k, sin b_k)`` of one norm
+    ``rho`` (``A = J_qb^T``: every wire on the pitch circle), or with ``f_min = 0`` and any norms,
+    that is ``cos(phi - b_k) > f_min / (rho |lam|)`` for ``lam = |lam| (cos phi, sin phi)``: the
+    wires within an open arc of less than 180 deg centred on ``phi``. So the solution's free set is
+    empty or a run of wires consecutive in the order of their angles ``b_k``, spanning less than
+    180 deg: ``n^2 + 1`` candidates. A run is the solution's set exactly when its ``lam`` puts its
+    two end wires above ``f_min`` and the two wires just outside it at or below (the free set of
+    any ``lam`` is such an arc) and reaches ``rhs``: four wires checked per candidate, against
+    every wire for the 2^n subsets of :func:`_choose_free_set`. Everything but ``lam`` and that
+    check depends on
+    ``A`` and ``f_min`` alone (shared by all poses under ``vmap``). No gradient. For ``A`` with
+    unequal column norms and ``f_min > 0`` the solution's set need not be a run: such poses come out
+    flagged infeasible, never wrong (``min_norm_tensions`` checks the KKT conditions).
+    """
+    A, rhs, f_min = (jax.lax.stop_gradient(x) for x in (A, rhs, f_min))
+    n = A.shape[1]
+    order = jnp.argsort(jnp.arctan2(A[1], A[0]))  # the wires in angular order
+    a0, a1 = A[0][order], A[1][order]
+    start, length = _arc_runs(n)
+    # sums over each run by differences of prefix sums over the wires twice round (no (K, n) array:
+    # K = n^2 + 1 runs; at 256 wires that would be 134 MB of constants)
+    def run_sum(x):
+        cs = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(jnp.concatenate([x, x]))])
+        return cs[start + length] - cs[start]
+
+    g00, g01, g11 = run_sum(a0 * a0), run_sum(a0 * a1), run_sum(a1 * a1)  # A_S A_S^T
+    det = g00 * g11 - g01 * g01  # the wires of a run span < 180 deg: no two parallel
+    tr = g00 + g11
+    rank2 = (length > 1) & (det > (max(n, 2) * eps_of(A) * tr) ** 2)
+    rank1 = ~rank2 & (tr > 0)
+    det_s, tr_s = jnp.where(rank2, det, 1.0), jnp.where(rank1, tr, 1.0)
+
+    def pinv_entry(adj, g):  # of pinv(A_S A_S^T): adj / det (rank 2), G / tr^2 (rank 1), 0
+        return jnp.where(rank2, adj / det_s, jnp.where(rank1, g / tr_s**2, 0.0))
+
+    i00, i01, i11 = pinv_entry(g11, g00), pinv_entry(-g01, g01), pinv_entry(g00, g11)
+    c0 = f_min * (jnp.sum(a0) - run_sum(a0))  # the bound wires' pull, f_min A 1_{not S}
+    c1 = f_min * (jnp.sum(a1) - run_sum(a1))
+    ang = jnp.arctan2(a1, a0)
+    first, last = start, (start + length - 1) % n
+    span = jnp.mod(ang[last] - ang[first], 2 * jnp.pi)
+    runs = (length > 0) & ((length == 1) | (span < jnp.pi))  # a free set spans less than 180 deg
+    inside = length < n  # the run has wires outside it
+    before, after = (start - 1) % n, (start + length) % n
+    inv_norm_A = 1.0 / jnp.linalg.norm(A)
+
+    r0, r1 = rhs[0] - c0, rhs[1] - c1
+    lam0, lam1 = i00 * r0 + i01 * r1, i01 * r0 + i11 * r1
+
+    def y(k):  # a_k . lam of each candidate's wire k
+        return a0[k] * lam0 + a1[k] * lam1
+
+    wrong = jnp.maximum(jnp.maximum(f_min - y(first), f_min - y(last)),
+                        jnp.where(inside, jnp.maximum(y(before), y(after)) - f_min, -jnp.inf))
+    wrong = jnp.where(length > 0, jnp.maximum(wrong, 0.0), 0.0)  # the empty set: lam = 0, all bound
+    miss = (jnp.abs(g00 * lam0 + g01 * lam1 + c0 - rhs[0])
+            + jnp.abs(g01 * lam0 + g11 * lam1 + c1 - rhs[1])) * inv_norm_A
+    viol = jnp.where(runs | (length == 0), wrong + miss, jnp.inf)
+    best = jnp.argmin(viol)  # the first of least violation
+    # the chosen run's wires, in angular order
+    member = (np.arange(n) - jnp.asarray(start)[best]) % n < jnp.asarray(length)[best]
+    return jnp.zeros(n, A.dtype).at[order].set(member.astype(A.dtype))  # back to the wires' order
+
+
 def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     """Exact solution of ``min ||tau||^2 s.t. A tau = rhs, tau >= f_min`` for ``A`` of shape (2, n).
 
@@ -152,15 +245,21 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     dt = jnp.result_type(A, rhs, f_min, float)
     A, rhs, f_min = A.astype(dt), jnp.asarray(rhs, dt), jnp.asarray(f_min, dt)
     # The chosen set, materialised once (`keep`): XLA:CPU would otherwise repeat the enumeration
-    # inside the loop of every value that depends on it. Its bits are the free mask (_free_sets
-    # lists the subsets in binary order, first wire most significant).
-    chosen = keep([_choose_free_set(A, rhs, f_min)], A[0, 0])[0].astype(jnp.int32)
-    free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
-    P0, P1 = pinv_tall2_cols([A[0, k] * free[k] for k in range(n)], [A[1, k] * free[k] for k in range(n)])
-    r = [rhs[i] - f_min * sum(A[i, k] * (1.0 - free[k]) for k in range(n)) for i in range(2)]
-    t = [P0[k] * r[0] + P1[k] * r[1] for k in range(n)]  # pinv(A_S)^T r: the free tensions
-    tau = jnp.stack([t[k] + f_min * (1.0 - free[k]) for k in range(n)])
-    lam = jnp.stack([sum(P0[k] * t[k] for k in range(n)), sum(P1[k] * t[k] for k in range(n))])
+    # inside the loop of every value that depends on it.
+    if n > MAX_SUBSET_WIRES:  # many wires: the runs of _arc_free_mask, O(n^2) candidates
+        free = keep([_arc_free_mask(A, rhs, f_min)], A[0, 0])[0]
+    else:  # the 2^n subsets; the chosen index's bits are the free mask (_free_sets lists the
+        # subsets in binary order, first wire most significant)
+        chosen = keep([_choose_free_set(A, rhs, f_min)], A[0, 0])[0].astype(jnp.int32)
+        free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
+    fr, a0, a1 = per_wire(free), per_wire(A[0]), per_wire(A[1])
+    P0, P1 = pinv_tall2_cols(wmap(lambda x, f: x * f, a0, fr), wmap(lambda x, f: x * f, a1, fr))
+    r = [rhs[i] - f_min * wsum(wmap(lambda x, f: x * (1.0 - f), ai, fr))
+         for i, ai in enumerate((a0, a1))]
+    t = wmap(lambda p0, p1: p0 * r[0] + p1 * r[1], P0, P1)  # pinv(A_S)^T r: the free tensions
+    tau = wstack(wmap(lambda tk, f: tk + f_min * (1.0 - f), t, fr))
+    lam = jnp.stack([wsum(wmap(lambda p, tk: p * tk, P0, t)),
+                     wsum(wmap(lambda p, tk: p * tk, P1, t))])
     res = kkt_residual(A, rhs, f_min, tau, lam)
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
@@ -173,12 +272,13 @@ def kkt_residual(A, rhs, f_min, tau, lam):
     Written on scalars (``A`` is 2 x n): vmapped, the per-pose products stay elementwise instead of
     tiny batched matrix products, which XLA:CPU hands to a library call per chunk.
     """
-    n = A.shape[1]
+    a0, a1, tk = per_wire(A[0]), per_wire(A[1]), per_wire(tau)
     norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
-    primal = _norm([sum(A[i, k] * tau[k] for k in range(n)) - rhs[i] for i in range(2)])
-    station = functools.reduce(jnp.maximum, [
-        jnp.abs(tau[k] - jnp.maximum(f_min, A[0, k] * lam[0] + A[1, k] * lam[1])) for k in range(n)])
-    max_tau = functools.reduce(jnp.maximum, [jnp.abs(tau[k]) for k in range(n)])
+    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i]
+                    for i, ai in enumerate((a0, a1))])
+    station = wmax(wmap(lambda t, x, y: jnp.abs(t - jnp.maximum(f_min, x * lam[0] + y * lam[1])),
+                        tk, a0, a1))
+    max_tau = wmax(wmap(jnp.abs, tk))
     scale = _norm(rhs) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
     return (primal + station * norm_A) / scale
 
@@ -335,7 +435,9 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
     ``deflection_deg_full``, ``deflection_deg_reduced`` (``|dx[3:]|``, deg), ``dx = C_x w``;
     ``tensions`` (n,) N; ``n_taut_statics`` (int); ``feasible`` (bool). "reduced" uses the
     statics taut set, "full" all wires. Where the pose is infeasible (the wires would have to
-    push) or a stiffness is not positive definite, the deflections and tensions are NaN.
+    push) or a stiffness is not positive definite, the deflections and tensions are NaN. NaN in, NaN
+    out: for a non-finite pose or wrench, or an invalid (traced) design, every value is NaN,
+    ``n_taut_statics`` -1 and ``feasible`` False.
     """
     w = as_wrench(wrench)
     b = jnp.stack(keep(list(_b_of(design, theta_L, delta)), design.length))  # its sine and cosine, once per pose
@@ -353,7 +455,7 @@ def compliance_pose(design: Design, theta_L, delta, wrench):
         out[f"deflection_deg_{mode}"] = jnp.where(good, jnp.degrees(_norm(dx[3:])), jnp.nan)
     out["n_taut_statics"] = jnp.sum(jax.lax.stop_gradient(mask)).astype(jnp.int32)
     out["feasible"] = feas
-    return out
+    return nan_where(design.invalid() | not_finite(theta_L, delta, w), out)
 
 
 #: Jitted :func:`compliance_pose` (``design`` values and the wrench are traced: no recompile).

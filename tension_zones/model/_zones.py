@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import float_dtype, straight_through
+from .._numerics import float_dtype, nan_where, not_finite, straight_through
 from ._design import Design
 from ._kinematics import THETA_0, J_qpsi, J_xq
 
@@ -37,7 +37,7 @@ def tension_score(design: Design, delta, theta_L=None, psi_dot=None):
     dt = float_dtype(design.length, delta)
     delta = jnp.asarray(delta, dt)
     if psi_dot is None:
-        return jnp.cos(delta + design.wire_angles)
+        return nan_where(design.invalid(), jnp.cos(delta + design.wire_angles))
     if theta_L is None:
         raise ValueError("a tension score for a given psi_dot needs theta_L")
     theta_L = jnp.asarray(theta_L, dt)
@@ -46,13 +46,15 @@ def tension_score(design: Design, delta, theta_L=None, psi_dot=None):
     scale2 = psi_dot[0] ** 2 + ((theta_L - THETA_0) * psi_dot[1]) ** 2
     nz = scale2 > 0
     scale = design.pitch_radius * jnp.sqrt(jnp.where(nz, scale2, 1.0))
-    return jnp.where(nz, -q_dot / scale, 0.0)
+    bad = design.invalid() | not_finite(theta_L, delta, psi_dot)  # the guard would give 0 for NaN
+    return nan_where(bad, jnp.where(nz, -q_dot / scale, 0.0))
 
 
 def tension_mask(design: Design, delta, theta_L=None, psi_dot=None, temperature=TEMPERATURE):
     """Which wires are in tension, (n,) float 0/1, with a straight-through gradient.
 
-    Forward: exactly ``1.0`` where ``tension_score > 1e-9`` (MODEL.md boundary rule), else ``0.0``.
+    Forward: exactly ``1.0`` where ``tension_score > 1e-9`` (MODEL.md boundary rule), else ``0.0``;
+    NaN where the score is (NaN inputs, an invalid design).
     Backward: the gradient of ``sigmoid(score / temperature)``, so design variables that move a
     wire across its zone boundary (wire angles, the bending direction) get a useful gradient.
     """
@@ -60,8 +62,9 @@ def tension_mask(design: Design, delta, theta_L=None, psi_dot=None, temperature=
 
 
 def mask_from_score(score, temperature=TEMPERATURE):
-    """:func:`tension_mask` from a :func:`tension_score` the caller already has."""
-    return straight_through(score > BOUNDARY_TOL, jax.nn.sigmoid(score / temperature))
+    """:func:`tension_mask` from a :func:`tension_score` the caller has (NaN where it is NaN)."""
+    mask = straight_through(score > BOUNDARY_TOL, jax.nn.sigmoid(score / temperature))
+    return jnp.where(jnp.isnan(score), jnp.nan, mask)
 
 
 def reduced_J_qpsi(design: Design, theta_L, delta, psi_dot=None):

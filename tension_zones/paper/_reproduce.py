@@ -74,7 +74,9 @@ def reproduce(out: Path, quiet: bool = False) -> dict:
         for path in step(out, summary, quiet):
             if not quiet:
                 print(f"  wrote {path}")
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    from .._io import write_text
+
+    write_text(out / "summary.json", json.dumps(summary, indent=2))
     if not quiet:
         print(f"  wrote {out / 'summary.json'}")
     return summary

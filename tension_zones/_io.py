@@ -1,0 +1,42 @@
+"""Output files written so that an interrupted write loses nothing.
+
+:func:`atomic_path` hands out a temporary name in the target's own folder (same file system, same
+suffix, so writers that infer the format from the name still do); the finished file replaces the
+target in one ``os.replace``. Until then the old file, if any, is untouched, and on any error or
+interrupt the temporary file is removed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """``with atomic_path(p) as tmp: write(tmp)``: ``p`` appears, complete, when the block ends."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    os.close(fd)
+    try:
+        yield Path(tmp)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would make outputs private
+        os.replace(tmp, path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+
+
+def write_text(path, text: str) -> Path:
+    """``Path(path).write_text(text)``, atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)

@@ -1,0 +1,314 @@
+"""Bad inputs: one line, exit status 2, no traceback, nothing overwritten, nothing written.
+
+Two tables, each row one bad input:
+
+* ``CLI``: ``(id, argv, needle)``. ``argv`` is a list of strings in which ``{tmp}`` stands for the
+  test's folder; the folder is first filled by :func:`_files` (existing outputs, good and bad input
+  files; add a file there when a row needs one). A row passes when ``main(argv)`` returns 2, stderr
+  is exactly one line containing ``needle``, no ``Traceback`` is printed, every file that existed
+  before is byte for byte unchanged, and no file was added.
+* ``API``: ``(id, call, needle)``; ``call`` is a function of no arguments that must raise a
+  ``ValueError`` (or ``TypeError``) whose message is one line containing ``needle``.
+
+Calibration rows go in the same tables (``["calibrate", ...]``).
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import tension_zones as tz
+from tension_zones.cli import main
+
+GOOD_SCENARIO = {"n_wires": [3], "theta_L_deg": [30, 80, 50], "delta_deg": [0, 350, 50],
+                 "optimizer": {"starts": 1, "steps": 2}}
+
+
+def _files(tmp):
+    """The inputs and existing outputs the rows refer to."""
+    (tmp / "old.png").write_bytes(b"an earlier map")
+    (tmp / "old.npz").write_bytes(b"an earlier sweep")
+    (tmp / "run").mkdir()
+    (tmp / "run" / "result.json").write_text('{"earlier": true}')
+    (tmp / "full").mkdir()
+    (tmp / "full" / "notes.txt").write_text("someone's notes")
+    (tmp / "dir.png").mkdir()
+    (tmp / "dir.npz").mkdir()
+    (tmp / "file.txt").write_text("a file, not a folder")
+    (tmp / "good.json").write_text(json.dumps(GOOD_SCENARIO))
+    (tmp / "broken.json").write_text('{"n_wires": [3], ')
+    (tmp / "list.json").write_text("[1, 2]")
+    (tmp / "latin1.json").write_bytes(b'{"length_mm": 20, "note": "\xe9"}')
+    (tmp / "scen_dir.json").mkdir()
+    for name, change in {
+        "unknown": {"colour": "red"},
+        "n_str": {"n_wires": "3"},
+        "n_two": {"n_wires": [2, 3]},
+        "strict_str": {"strict_controllability": "yes"},
+        "radius_order": {"pitch_radius_mm": [3.0, 1.0]},
+        "theta_range": {"theta_L_deg": [0, 120, 5]},
+        "nan_dq": {"joint_uncertainty_mm": float("nan")},
+        "weights_key": {"weights": {"cost": 1}},
+        "starts_zero": {"optimizer": {"starts": 0}},
+        "load_short": {"load_N": [1, 2]},
+        "arc_fixed": {"forbidden_arc_deg": [10, 50]},
+    }.items():
+        (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
+
+
+SWEEP = ["sweep", "--wires", "3", "--length", "20", "--pitch-radius", "2"]
+COMPLIANCE = SWEEP + ["--compliance", "--wire-stiffness", "75", "--backbone-EI", "1200", "--load", "5,0,0"]
+OPT = ["optimize", "--scenario"]
+
+CLI = [
+    # usage errors (argparse): one line too
+    ("no-command", [], "the following arguments are required: COMMAND"),
+    ("unknown-command", ["frobnicate"], "invalid choice: 'frobnicate'"),
+    ("maps-wires-not-int", ["maps", "--wires", "three", "--out", "{tmp}/m.png"], "invalid int value"),
+    ("maps-missing-out", ["maps", "--wires", "3"], "required: --out"),
+    # maps
+    ("maps-two-wires", ["maps", "--wires", "2", "--out", "{tmp}/m.png"], "n_wires must be at least 3"),
+    ("maps-negative-wires", ["maps", "--wires", "-4", "--out", "{tmp}/m.png"], "n_wires must be at least 3"),
+    ("maps-too-many-wires", ["maps", "--wires", "100000", "--out", "{tmp}/m.png"], "at most 256"),
+    ("maps-angles-text", ["maps", "--wires", "3", "--angles", "0,x,2", "--out", "{tmp}/m.png"],
+     "--angles must be comma-separated"),
+    ("maps-angles-count", ["maps", "--wires", "3", "--angles", "0,1", "--out", "{tmp}/m.png"],
+     "--angles has 2 values"),
+    ("maps-angles-nan", ["maps", "--wires", "3", "--angles", "0,nan,2", "--out", "{tmp}/m.png"],
+     "--angles must be finite"),
+    ("maps-angles-coincident", ["maps", "--wires", "3", "--angles", "0,360,90", "--out", "{tmp}/m.png"],
+     "coincident wires 1 and 2"),
+    ("maps-out-suffix", ["maps", "--wires", "3", "--out", "{tmp}/m.jpg"], "must end in .png"),
+    ("maps-out-no-parent", ["maps", "--wires", "3", "--out", "{tmp}/nope/m.png"], "does not exist"),
+    ("maps-out-parent-is-file", ["maps", "--wires", "3", "--out", "{tmp}/file.txt/m.png"], "is a file"),
+    ("maps-out-is-folder", ["maps", "--wires", "3", "--out", "{tmp}/dir.png"], "is a folder"),
+    ("maps-out-exists", ["maps", "--wires", "3", "--out", "{tmp}/old.png"], "pass --force"),
+    # sweep
+    ("sweep-negative-length", SWEEP[:4] + ["-1", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+     "length must be positive"),
+    ("sweep-nan-length", SWEEP[:4] + ["nan", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+     "length must be finite"),
+    ("sweep-zero-radius", SWEEP[:6] + ["0", "--out", "{tmp}/s.npz"], "pitch_radius must be positive"),
+    ("sweep-zero-dq", SWEEP + ["--dq", "0", "--out", "{tmp}/s.npz"], "--dq must be a positive number"),
+    ("sweep-nan-dq", SWEEP + ["--dq", "nan", "--out", "{tmp}/s.npz"], "--dq must be a positive number"),
+    ("sweep-negative-step", SWEEP + ["--theta-step", "-5", "--out", "{tmp}/s.npz"],
+     "--theta-step must be a positive number"),
+    ("sweep-zero-delta-step", SWEEP + ["--delta-step", "0", "--out", "{tmp}/s.npz"],
+     "--delta-step must be a positive number"),
+    ("sweep-grid-too-fine", SWEEP + ["--theta-step", "1e-6", "--out", "{tmp}/s.npz"],
+     "sweeps at most 20,000,000"),
+    ("sweep-too-many-wires", ["sweep", "--wires", "4096", "--length", "20", "--pitch-radius", "2",
+                              "--out", "{tmp}/s.npz"], "--wires must be at most 256"),
+    ("sweep-compliance-missing", SWEEP + ["--compliance", "--out", "{tmp}/s.npz"],
+     "--compliance needs --wire-stiffness, --backbone-EI, --load"),
+    ("sweep-load-alone", SWEEP + ["--load", "1,2,3", "--out", "{tmp}/s.npz"], "go with --compliance"),
+    ("sweep-load-text", COMPLIANCE[:-1] + ["1,x,3", "--out", "{tmp}/s.npz"], "--load must be"),
+    ("sweep-load-short", COMPLIANCE[:-1] + ["1,2", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),
+    ("sweep-load-inf", COMPLIANCE[:-1] + ["inf,0,0", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),
+    ("sweep-negative-stiffness", SWEEP + ["--compliance", "--wire-stiffness", "-75", "--backbone-EI",
+                                          "1200", "--load", "5,0,0", "--out", "{tmp}/s.npz"],
+     "--wire-stiffness: wire_stiffness must be positive"),
+    ("sweep-negative-preload", COMPLIANCE + ["--preload", "-1", "--out", "{tmp}/s.npz"],
+     "--preload: preload must be non-negative"),
+    ("sweep-out-suffix", SWEEP + ["--out", "{tmp}/s.csv"], "must end in .npz"),
+    ("sweep-out-is-folder", SWEEP + ["--out", "{tmp}/dir.npz"], "is a folder"),
+    ("sweep-out-exists", SWEEP + ["--out", "{tmp}/old.npz"], "pass --force"),
+    ("sweep-out-no-parent", SWEEP + ["--out", "{tmp}/nope/s.npz"], "does not exist"),
+    # optimize
+    ("opt-scenario-missing", OPT + ["{tmp}/none.json", "--out", "{tmp}/o"], "does not exist"),
+    ("opt-scenario-folder", OPT + ["{tmp}/scen_dir.json", "--out", "{tmp}/o"], "is a folder"),
+    ("opt-scenario-broken", OPT + ["{tmp}/broken.json", "--out", "{tmp}/o"], "is not valid JSON"),
+    ("opt-scenario-list", OPT + ["{tmp}/list.json", "--out", "{tmp}/o"], "must be a JSON object"),
+    ("opt-scenario-latin1", OPT + ["{tmp}/latin1.json", "--out", "{tmp}/o"], "is not UTF-8 text"),
+    ("opt-unknown-key", OPT + ["{tmp}/unknown.json", "--out", "{tmp}/o"], "unknown scenario key"),
+    ("opt-n-wires-string", OPT + ["{tmp}/n_str.json", "--out", "{tmp}/o"], "'n_wires'"),
+    ("opt-n-wires-two", OPT + ["{tmp}/n_two.json", "--out", "{tmp}/o"], "integers from 3 to 16"),
+    ("opt-strict-string", OPT + ["{tmp}/strict_str.json", "--out", "{tmp}/o"],
+     "'strict_controllability': must be true or false"),
+    ("opt-radius-order", OPT + ["{tmp}/radius_order.json", "--out", "{tmp}/o"], "is larger than max"),
+    ("opt-theta-range", OPT + ["{tmp}/theta_range.json", "--out", "{tmp}/o"], "must lie within"),
+    ("opt-nan-dq", OPT + ["{tmp}/nan_dq.json", "--out", "{tmp}/o"], "'joint_uncertainty_mm'"),
+    ("opt-weights-key", OPT + ["{tmp}/weights_key.json", "--out", "{tmp}/o"], "unknown sub-key"),
+    ("opt-starts-zero", OPT + ["{tmp}/starts_zero.json", "--out", "{tmp}/o"], "'optimizer.starts'"),
+    ("opt-load-short", OPT + ["{tmp}/load_short.json", "--out", "{tmp}/o"], "'load_N'"),
+    ("opt-arc-needs-free", OPT + ["{tmp}/arc_fixed.json", "--out", "{tmp}/o"], "needs free_wire_angles"),
+    ("opt-out-is-file", OPT + ["{tmp}/good.json", "--out", "{tmp}/file.txt"], "must be a folder"),
+    ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"],
+     "already holds 'result.json'"),
+    ("opt-out-no-parent", OPT + ["{tmp}/good.json", "--out", "{tmp}/nope/o"], "does not exist"),
+    # reproduce
+    ("reproduce-out-is-file", ["reproduce", "--out", "{tmp}/file.txt"], "must be a folder"),
+    ("reproduce-out-not-empty", ["reproduce", "--out", "{tmp}/full"], "already holds 'notes.txt'"),
+    ("reproduce-out-no-parent", ["reproduce", "--out", "{tmp}/nope/r"], "does not exist"),
+]
+
+
+def _snapshot(root):
+    return {p: p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def _run_cli(tmp_path, capsys, argv):
+    _files(tmp_path)
+    before = _snapshot(tmp_path)
+    try:
+        rc = main([a.replace("{tmp}", str(tmp_path)) for a in argv])
+    except SystemExit as e:  # usage errors exit from argparse (one line, status 2)
+        rc = e.code
+    out, err = capsys.readouterr()
+    return rc, out, err, before, _snapshot(tmp_path)
+
+
+@pytest.mark.parametrize("argv, needle", [c[1:] for c in CLI], ids=[c[0] for c in CLI])
+def test_cli_bad_input(tmp_path, capsys, argv, needle):
+    rc, out, err, before, after = _run_cli(tmp_path, capsys, argv)
+    assert rc == 2, (rc, err)
+    assert err.count("\n") == 1 and err.startswith("tension-zones: error: "), err
+    assert needle in err, err
+    assert "Traceback" not in out + err
+    assert after == before, "a file was written or changed"
+
+
+def test_the_table_is_large_and_names_are_unique():
+    assert len(CLI) >= 40 and len({c[0] for c in CLI}) == len(CLI)
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
+                    reason="root may write in a read-only folder (see the probe test below)")
+@pytest.mark.parametrize("argv", [["maps", "--wires", "3", "--out", "{tmp}/ro/m.png"],
+                                  SWEEP + ["--out", "{tmp}/ro/s.npz"],
+                                  OPT + ["{tmp}/good.json", "--out", "{tmp}/ro/o"],
+                                  ["reproduce", "--out", "{tmp}/ro"]])
+def test_read_only_folder(tmp_path, capsys, argv):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        rc, _out, err, before, after = _run_cli(tmp_path, capsys, argv)
+    finally:
+        ro.chmod(0o755)
+    assert rc == 2 and err.count("\n") == 1 and "cannot write in the folder" in err, err
+    assert after == before
+
+
+@pytest.mark.parametrize("argv", [["maps", "--wires", "3", "--out", "{tmp}/m.png"],
+                                  SWEEP + ["--out", "{tmp}/s.npz"],
+                                  OPT + ["{tmp}/good.json", "--out", "{tmp}/o"],
+                                  ["reproduce", "--out", "{tmp}/r"]])
+def test_an_unwritable_folder_is_found_before_any_work(tmp_path, capsys, monkeypatch, argv):
+    """The write probe fails as on a read-only file system (also as root): one line, before any
+    computation (the commands' work functions must not be reached)."""
+    import importlib
+    import tempfile
+
+    def refuse(*a, **k):
+        raise PermissionError(13, "Permission denied")
+
+    def work(*a, **k):
+        raise AssertionError("the computation started before --out was checked")
+
+    for module, name in (("analysis._sweep", "sweep_grid"), ("design._optimise", "optimize"),
+                         ("paper._reproduce", "reproduce"), ("model._zones", "tension_map")):
+        monkeypatch.setattr(importlib.import_module(f"tension_zones.{module}"), name, work)
+    monkeypatch.setattr(tempfile, "mkstemp", refuse)
+    rc, _out, err, before, after = _run_cli(tmp_path, capsys, argv)
+    assert rc == 2 and err.count("\n") == 1, err
+    assert "cannot write in the folder" in err and "Permission denied" in err
+    assert after == before
+
+
+def test_force_overwrites_and_writes_atomically(tmp_path, capsys):
+    _files(tmp_path)
+    assert main(["maps", "--wires", "3", "--out", str(tmp_path / "old.png"), "--force", "--quiet"]) == 0
+    assert (tmp_path / "old.png").read_bytes()[:4] == b"\x89PNG"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")], "a temporary file was left"
+
+
+@pytest.mark.slow
+def test_console_script_prints_one_line_without_traceback(tmp_path):
+    _files(tmp_path)
+    before = _snapshot(tmp_path)
+    r = subprocess.run([sys.executable, "-m", "tension_zones.cli", "sweep", "--wires", "3", "--length",
+                        "20", "--pitch-radius", "2", "--out", str(tmp_path / "old.npz")],
+                       capture_output=True, text=True, timeout=300, check=False)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "pass --force" in r.stderr
+    assert "Traceback" not in r.stderr and _snapshot(tmp_path) == before
+
+
+# ------------------------------------------------------------------------------------------------
+# API
+# ------------------------------------------------------------------------------------------------
+def _from_dict(**change):
+    return lambda: tz.Design.from_dict({"n_wires": 3, "length_mm": 20, "pitch_radius_mm": 2, **change})
+
+
+def _sweep(**kw):
+    from tension_zones.analysis._sweep import sweep_grid
+
+    d = tz.Design(3, 20.0, 2.0)
+    fn = kw.pop("fn", lambda design, t, e: {"p": tz.tip_pose(design, t, e)[0]})
+    th = kw.pop("th", np.radians([10.0, 20.0]))
+    return lambda: sweep_grid(fn, kw.pop("design", d), th, np.radians([0.0, 90.0]), quiet=True, **kw)
+
+
+API = [
+    ("design-two-wires", lambda: tz.Design(2, 20.0, 2.0), "n_wires must be at least 3"),
+    ("design-float-wires", lambda: tz.Design(3.0, 20.0, 2.0), "n_wires must be an integer"),
+    ("design-negative-length", lambda: tz.Design(3, -20.0, 2.0), "length must be positive"),
+    ("design-bool-length", lambda: tz.Design(3, True, 2.0), "length must be a number"),
+    ("design-string-radius", lambda: tz.Design(3, 20.0, "2"), "pitch_radius must be a number"),
+    ("design-inf-radius", lambda: tz.Design(3, 20.0, np.inf), "pitch_radius must be finite"),
+    ("design-angles-count", lambda: tz.Design(3, 20.0, 2.0, wire_angles=[0.0, 1.0]), "wire_angles"),
+    ("design-replace-preload", lambda: tz.Design(3, 20.0, 2.0).replace(preload=-1.0), "preload"),
+    ("file-n-wires-string", _from_dict(n_wires="3"), "n_wires must be an integer of at least 3, got '3'"),
+    ("file-n-wires-bool", _from_dict(n_wires=True), "(a boolean)"),
+    ("file-n-wires-fraction", _from_dict(n_wires=3.5), "got 3.5"),
+    ("file-length-string", _from_dict(length_mm="20"), "length_mm must be a number"),
+    ("file-angles-entry", _from_dict(wire_angles_deg=[0, "a", 2]), "wire_angles_deg[1] must be a number"),
+    ("file-angles-scalar", _from_dict(wire_angles_deg=90), "must be a list of numbers"),
+    ("file-unknown-key", _from_dict(colour="red"), "unknown design key"),
+    ("file-not-object", lambda: tz.Design.from_dict([1, 2]), "must hold a JSON object"),
+    ("scenario-not-object", lambda: tz.parse_scenario([]), "must be a JSON object"),
+    ("scenario-strict", lambda: tz.parse_scenario({"strict_controllability": 1}), "true or false"),
+    ("scenario-min-spread", lambda: tz.parse_scenario({"min_spread": 2}), "'min_spread'"),
+    ("scenario-grid-too-fine", lambda: tz.parse_scenario({"delta_deg": [0, 360, 1e-6]}), "too fine"),
+    ("grid-step-zero", lambda: tz.grid_deg(85.0, 0.0), "a grid step must be a positive number"),
+    ("grid-reversed", lambda: tz.grid_deg(-5.0, 1.0), "start <= stop"),
+    ("sweep-chunk", _sweep(chunk_size=0), "chunk_size must be a positive integer"),
+    ("sweep-keep", _sweep(keep=["nope"]), "keep names unknown output"),
+    ("sweep-2d-axis", _sweep(th=np.zeros((2, 2))), "1-D grids"),
+    ("sweep-not-design", _sweep(design={"n_wires": 3}), "must be a tension_zones.Design"),
+    ("sweep-not-dict", _sweep(fn=lambda design, t, e: t), "must return a dict"),
+    ("measures-mask-shape", lambda: tz.pose_measures(tz.Design(4, 20.0, 2.0), 0.5, 0.1, 0.4, np.ones(3)),
+     "mask must have shape (4,)"),
+    ("wrench-shape", lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, np.ones(4)),
+     "3 (force) or 6 (force, moment) components"),
+    ("wrench-nan", lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, [np.nan, 0, 0]),
+     "a wrench must be finite"),
+    ("compliance-grid-theta", lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), theta_L_deg=[100.0]),
+     "theta_L_deg must lie in (-90, 90]"),
+    ("compliance-grid-empty", lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), delta_deg=[]),
+     "non-empty 1-D array"),
+    ("tension-map-psi-dot", lambda: tz.tension_map(tz.Design(3, 20.0, 2.0), psi_dot=[-1.0, 0.0]),
+     "needs theta_L"),
+    ("tension-score-psi-dot", lambda: tz.tension_score(tz.Design(3, 20.0, 2.0), 0.1, psi_dot=[1.0, 0.0]),
+     "needs theta_L"),
+    ("over-grid-mismatch", lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2),
+                                                                   np.zeros(2), 0.4, np.ones(3)),
+     "mask must have shape"),
+]
+
+
+@pytest.mark.parametrize("call, needle", [c[1:] for c in API], ids=[c[0] for c in API])
+def test_api_bad_input(call, needle):
+    with pytest.raises((ValueError, TypeError)) as e:
+        call()
+    msg = str(e.value)
+    assert needle in msg and "\n" not in msg, msg
+
+
+def test_the_api_table_is_large():
+    assert len(API) >= 30 and len({c[0] for c in API}) == len(API)
