@@ -313,7 +313,7 @@ def cmd_calibrate(args) -> None:
     try:
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            robot = Robot.from_json(args.design)
+            robot = Robot.from_json(args.design, warn_missing=True)
         for w in caught:
             print(f"tension-zones: warning: {w.message}", file=sys.stderr)
         kw = {"n_wires": robot.n_wires, "drop_bad": args.drop_bad}

@@ -412,3 +412,24 @@ def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():
     ref = minimize(lambda y: float(V(jnp.asarray(y))), np.zeros(4), jac=lambda y: np.asarray(G(jnp.asarray(y))),
                    method="BFGS", options={"gtol": 1e-10})
     assert float(V(jnp.asarray(x))) <= ref.fun + 1e-9
+
+
+def test_robot_file_names_missing_physical_keys_per_segment(tmp_path):
+    import json
+    import warnings
+
+    from tension_zones.model import MissingDesignKeyWarning
+
+    full = {"n_wires": 3, "length_mm": 20.0, "pitch_radius_mm": 2.0, "wire_stiffness_N_per_mm": 80.0,
+            "backbone_EI_Nmm2": 900.0, "preload_N": 0.5}
+    part = {k: v for k, v in full.items() if k != "preload_N"}
+    p = tmp_path / "r.json"
+    p.write_text(json.dumps({"segments": [full, part]}))
+    with pytest.warns(MissingDesignKeyWarning, match=r"r\.json.*segment 1: 'preload_N' \(default 0 used\)") as rec:
+        tz.Robot.from_json(p, warn_missing=True)
+    assert len(rec) == 1 and "segment 0" not in str(rec[0].message)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        tz.Robot.from_json(p)  # opt-in only
+        p.write_text(json.dumps({"segments": [full, full]}))
+        tz.Robot.from_json(p, warn_missing=True)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 from typing import Any
 
 import jax
@@ -31,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._numerics import pinv_tall2, skew, straight_through
-from ._design import Design, read_json
+from ._design import Design, MissingDesignKeyWarning, missing_physical_keys, read_json
 from ._kinematics import b_to_psi, moment_arms, segment_J_xb, segment_pose
 from ._zones import BOUNDARY_TOL, TEMPERATURE
 
@@ -322,7 +323,7 @@ class Robot:
 
     # -- files -----------------------------------------------------------------------------------
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> Robot:
+    def from_dict(cls, d: dict[str, Any], warn_missing: bool = False) -> Robot:
         """``{"segments": [segment, ...]}`` (proximal first) or a single-segment design dict.
 
         A segment is a design dict (MODEL.md Sec. 6 keys). Segment ``j`` may add how its wires cross
@@ -330,11 +331,15 @@ class Robot:
         list with one entry per wire of the segment, every entry a list of ``j`` numbers (the wire's
         angle / pitch radius in segments 0, ..., j-1). Missing: the wire keeps its own angle and
         radius there (the default routing, see the module docstring).
+
+        ``warn_missing``: one :class:`MissingDesignKeyWarning` naming every segment's physical keys
+        that were left out (their defaults are used): a calibration should be told them, or it may
+        "find" a default as an effect.
         """
         if not isinstance(d, dict):
             raise ValueError(f"a design file must hold a JSON object, got {type(d).__name__}")
         if "segments" not in d:
-            return cls(Design.from_dict(d))
+            return cls(Design.from_dict(d, warn_missing=warn_missing))
         extra = sorted(set(d) - {"segments"})
         if extra:
             raise ValueError(f"unknown robot design key(s) {extra}; known: ['segments']")
@@ -352,6 +357,8 @@ class Robot:
             except ValueError as e:
                 raise ValueError(f"segment {i}: {e}") from None
             routes.append(route)
+        if warn_missing:
+            _warn_missing(designs, segs)
         robot = cls(designs)
         if not any(routes):
             return robot
@@ -365,8 +372,19 @@ class Robot:
         return cls(designs, route_angles=ra, route_radii=rr)
 
     @classmethod
-    def from_json(cls, path) -> Robot:
-        return cls.from_dict(read_json(path, "design file"))
+    def from_json(cls, path, warn_missing: bool = False) -> Robot:
+        """:meth:`from_dict` of a JSON file; errors and the missing-key warning name the file."""
+        d = read_json(path, "design file")
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always", MissingDesignKeyWarning)
+                robot = cls.from_dict(d, warn_missing=warn_missing)
+        except ValueError as e:
+            raise ValueError(f"design file {str(path)!r}: {e}") from None
+        for w in caught:
+            msg = f"design file {str(path)!r}: {w.message}" if w.category is MissingDesignKeyWarning else w.message
+            warnings.warn(msg, w.category, stacklevel=2)
+        return robot
 
     def to_dict(self) -> dict[str, Any]:
         out, k0 = [], 0
@@ -391,6 +409,19 @@ class Robot:
 
 
 jax.tree_util.register_pytree_node(Robot, Robot._tree_flatten, Robot._tree_unflatten)
+
+
+def _warn_missing(designs, dicts) -> None:
+    """One warning naming each segment's physical keys left out of the file (defaults used)."""
+    parts = []
+    for i, (seg, d) in enumerate(zip(designs, dicts)):
+        used = {"wire_stiffness_N_per_mm": seg.wire_stiffness, "backbone_EI_Nmm2": seg.backbone_EI,
+                "preload_N": seg.preload}
+        missing = missing_physical_keys(d)
+        if missing:
+            parts.append(f"segment {i}: " + ", ".join(f"{k!r} (default {float(used[k]):g} used)" for k in missing))
+    if parts:
+        warnings.warn("design leaves out " + "; ".join(parts), MissingDesignKeyWarning, stacklevel=3)
 
 
 def _routing_entry(value, j: int, n: int, key: str) -> np.ndarray:

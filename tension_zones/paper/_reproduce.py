@@ -65,6 +65,13 @@ STEPS = [
 
 
 def reproduce(out: Path, quiet: bool = False) -> dict:
+    """Reproduce the paper's figures and tables into the folder ``out``.
+
+    Runs :data:`STEPS` in order (tension maps, kinematic conditioning and pose uncertainty, compliance
+    with the identification of the paper's unreported segment), writes each figure as a PNG and the
+    numbers the paper reports beside ours in ``summary.json``; returns that summary. ``quiet``: no
+    progress lines. What ``tension-zones reproduce --out DIR`` runs.
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     summary: dict = {}
