@@ -518,7 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=cmd_maps)
 
     o = sub.add_parser("optimize", help="search wire count, pitch radius, stiffness and placement")
-    o.add_argument("--scenario", required=True, help="scenario JSON (keys: see the README)")
+    o.add_argument("--scenario", required=True, help="scenario JSON (keys: tension_zones/design/README.md; examples: tension-zones examples)")
     o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
     _add_force(o, "an earlier result in --out")
     o.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -2,6 +2,9 @@
 
 import json
 import pathlib
+import re
+import subprocess
+import sys
 
 import pytest
 
@@ -19,6 +22,24 @@ def test_readme_has_exactly_the_two_setup_commands():
     assert "pip install" in main_cmd and "tension-zones reproduce" in main_cmd
     assert "pip install" in test_cmd and "pytest" in test_cmd
     assert "test-command" in (ROOT / ".ci" / "run").read_text()
+
+
+def test_readme_is_a_short_front_door():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.encode()) <= 10 * 1024
+    assert re.search(r"issue \d", text, re.I) is None and "../shared" not in text
+
+
+@pytest.mark.slow
+def test_readme_example_runs_from_an_empty_folder(tmp_path):
+    """The README's ten lines, run where there is nothing but the installed package."""
+    text = (ROOT / "README.md").read_text()
+    code = text.split("## Ten lines of Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    assert 8 <= len(code.strip().splitlines()) <= 12
+    r = subprocess.run([sys.executable, "-c", code + "\nassert res.effects[0]['name'] == 'backlash'"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=600, check=False)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "taut" in r.stdout and "backlash" in r.stdout
 
 
 @pytest.mark.slow

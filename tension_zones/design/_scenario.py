@@ -15,7 +15,7 @@ import numpy as np
 
 from ..model._design import DEFAULT_BACKBONE_EI, read_json
 
-#: Every scenario key, its default and its meaning (the README's table is generated from this).
+#: Every scenario key, its default and its meaning (design/README.md's table lists them, tested).
 DEFAULTS: dict[str, Any] = {
     "length_mm": 20.0,
     "backbone_EI_Nmm2": DEFAULT_BACKBONE_EI,
