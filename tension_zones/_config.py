@@ -8,11 +8,27 @@ The package itself does not import JAX (``tension_zones/__init__.py`` is lazy): 
 yet it sets JAX's own switch ``JAX_ENABLE_X64=1`` in the environment (unless already set), which JAX
 reads when it is imported (child processes inherit it); this module, imported by every sub-package
 that uses JAX, sets the flag directly in case JAX was imported first.
+
+**XLA's CPU scheduler.** XLA's concurrency-optimised CPU scheduler can leave a computation waiting
+forever on this package's large vmapped while loops (seen on 2 cores: the rod model of a
+three-segment robot over 1000 samples hung with every thread idle; 5 s with the flag off). So the
+package adds ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA_FLAGS`` unless
+that flag is already there; XLA reads it when JAX makes its first array, so import
+``tension_zones`` before computing anything with JAX.
 """
 
 import os
 
 import jax
 
+_SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
+
+
+def xla_flags(flags: str) -> str:
+    """``XLA_FLAGS`` with the CPU scheduler flag added (see the module notes), unless already set."""
+    return flags if _SCHEDULER in flags else f"{flags} {_SCHEDULER}=false".strip()
+
+
 if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     jax.config.update("jax_enable_x64", True)
+os.environ["XLA_FLAGS"] = xla_flags(os.environ.get("XLA_FLAGS", ""))

@@ -195,6 +195,7 @@ class RobotTruth:
     d_radius: tuple = ()  # per segment, mm
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
     noise: float = 0.05
+    pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
 
 
 def _rodrigues(w):
@@ -244,23 +245,30 @@ class _Robot:
         self.N = sum(self.n)
         self.owner = np.repeat(np.arange(self.S), self.n)
         per = lambda v, d: np.full(self.N if d == "w" else self.S, 0.0) if len(v) == 0 else np.asarray(v, float)  # noqa: E731
-        self.L = np.array([s["length_mm"] for s in segs]) + per(truth.d_length, "s")
+        L_seg = np.array([s["length_mm"] for s in segs]) + per(truth.d_length, "s")
         r_seg = np.array([s["pitch_radius_mm"] for s in segs])
         alpha = np.radians(np.concatenate([s["wire_angles_deg"] for s in segs]))
         self.alpha = alpha + np.radians(np.asarray(truth.pattern_rotation_deg))[self.owner] \
             + np.radians(per(truth.angle_offsets_deg, "w"))
-        self.radius = r_seg[self.owner][:, None] + per(truth.d_radius, "s")[None, :]  # (N, S): wire k in segment j
-        self.EI = np.array([s["backbone_EI_Nmm2"] for s in segs]) * np.asarray(truth.EI_factors, float)
+        radius = r_seg[self.owner][:, None] + per(truth.d_radius, "s")[None, :]  # (N, S): wire k in segment j
+        EI = np.array([s["backbone_EI_Nmm2"] for s in segs]) * np.asarray(truth.EI_factors, float)
         k0 = np.array([s["wire_stiffness_N_per_mm"] for s in segs])[self.owner]
         self.k = k0 * (per(truth.stiffness_factors, "w") if len(truth.stiffness_factors) else 1.0)
         self.pre = np.array([s["preload_N"] for s in segs])[self.owner] + per(truth.d_preload, "w")
         self.f = np.asarray(truth.tip_force, float)
         self.g = np.asarray(truth.gravity, float)
         self.mu = np.asarray(truth.friction, float)
+        # the chain is made of pieces (m per segment, each of constant curvature; m = 1: the segments)
+        m = int(truth.pieces)
+        self.S = self.S * m  # from here on: pieces
+        self.L = np.repeat(L_seg / m, m)
+        self.EI = np.repeat(EI, m)
+        self.radius = np.repeat(radius, m, axis=1)
+        self.crossed = (self.owner + 1) * m  # pieces each wire runs through
         # wire length changes are linear in the bending vectors: dl = A x (own assembly of the rows)
         self.A = np.zeros((self.N, 2 * self.S))
         for k in range(self.N):
-            for j in range(self.owner[k] + 1):
+            for j in range(self.crossed[k]):
                 self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(self.alpha[k]), np.sin(self.alpha[k])])
         self.loaded = bool(np.any(self.f) or np.any(self.g))
 
@@ -324,7 +332,7 @@ class _Robot:
         for _ in range(30):  # friction: a fixed point of the tension factor and the bending
             res = minimize(lambda y: self.energy(y, q, t), x, jac=True, method="BFGS", options={"gtol": 1e-10})
             x = res.x
-            wrap = np.array([sum(np.hypot(*x.reshape(self.S, 2)[j]) for j in range(self.owner[k] + 1))
+            wrap = np.array([sum(np.hypot(*x.reshape(self.S, 2)[j]) for j in range(self.crossed[k]))
                              for k in range(self.N)])
             t_new = 1.0 + direction * (self.mu[0] + self.mu[1] * wrap)
             if np.max(np.abs(t_new - t)) < 1e-10:

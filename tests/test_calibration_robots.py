@@ -100,3 +100,19 @@ def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsy
     # an existing report is not replaced without --force
     assert main(args) == 2
     assert "already holds a report" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_a_rod_under_its_weight_is_named_variable_curvature_not_geometry(tmp_path):
+    """The generator's robot as an elastic rod (each segment in six constant-curvature pieces of its
+    own code path) under its weight: constant curvature cannot fit it; the loop must name the weight
+    and the varying curvature (not geometry or a registration standing in), recover the weight, and
+    predict the validation file at the noise."""
+    rep = run(tmp_path, "rod", RobotTruth(gravity=(0.0, 0.002, -0.003), pieces=6))
+    assert sorted(names(rep)) == ["gravity", "variable_curvature"]
+    floor = rep["noise_floor_mm"]
+    assert rep["rmse_before_mm"] > 10 * floor
+    assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
+    g = rep["parameters"]["fitted"]["gravity"]
+    np.testing.assert_allclose([g["gy_N_per_mm"], g["gz_N_per_mm"]], [0.002, -0.003], atol=2e-4)
+    assert min(rep["parameters"]["fitted"]["variable_curvature"].values()) > 0.7

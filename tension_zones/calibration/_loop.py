@@ -179,9 +179,10 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     t0 = time.perf_counter()
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
-    model = model or RobotModel.of(robot)
     library = default_library(data.frame) if library is None else tuple(library)
     nominal = default_nominal(data.frame) if nominal is None else tuple(nominal)
+    # the rod model (segments in pieces) only where an effect needs it: it costs a larger solve
+    model = model or RobotModel.of(robot, max((getattr(b, "pieces", 1) for b in (*nominal, *library)), default=1))
     train, held = data.split(holdout)
     n_fit = data.n_samples
     full = data if validate is None else data.concat(validate)
@@ -244,7 +245,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         remaining = [n for n in cand_names if n not in active]
         if not remaining:
             break
-        r, J = pb.jacobian(theta, active)
+        # effects that switch the solver are scored with their solver on (at null: the same model)
+        switched = [b.name for b in pb.spec.blocks if b.name in remaining and b.scored_on]
+        r, J = pb.jacobian(theta, active + switched)
         active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
         wts = _glitch_weights(r[held], sigma) if robust else None
         # the score test's null is "what is left is noise"; far above the noise floor, what is left is

@@ -19,7 +19,7 @@ import jax
 import jax.numpy as jnp
 
 from ..model import Robot, Structure
-from ..model._equilibrium import solve
+from ..model._equilibrium import piece_lengths, solve
 from ..model._robot import chain_tip
 from ._data import Dataset
 
@@ -47,19 +47,26 @@ def motion_direction(q, reset=None):
 
 @dataclasses.dataclass(frozen=True)
 class RobotModel:
-    """Any robot of the package (one segment or many) for the loop; hashable (only its wire counts)."""
+    """Any robot of the package (one segment or many) for the loop; hashable (only its wire counts and
+    the pieces per segment: 1, constant curvature; more, the rod model, whose ``curvature_freedom``
+    is declared 0 here, so that it is constant curvature until the ``variable_curvature`` effect
+    frees it)."""
 
     structure: Structure
 
     @classmethod
-    def of(cls, robot: Robot) -> RobotModel:
-        return cls(robot.structure)
+    def of(cls, robot: Robot, pieces: int = 1) -> RobotModel:
+        return cls(Structure(robot.n_wires_per_segment, pieces))
 
     def physical(self, robot: Robot) -> dict:
-        if robot.structure != self.structure:
+        if robot.n_wires_per_segment != self.structure.n_wires_per_segment:
             raise ValueError(f"the robot has wire counts {robot.n_wires_per_segment}, the model "
                              f"{self.structure.n_wires_per_segment}")
-        return robot.params()
+        phys = robot.params()
+        phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
+        if self.structure.pieces > 1:
+            phys["rod"] = jnp.zeros((), phys["length"].dtype)  # the rod solve is off until an effect turns it on
+        return phys
 
     def inputs(self, data: Dataset) -> dict:
         if data.n_wires != self.structure.n_wires:
@@ -69,11 +76,21 @@ class RobotModel:
         return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset}
 
     def predict(self, phys, inputs):
-        """Tip positions and orientations for all samples (one vmap over the equilibrium)."""
+        """Tip positions and orientations for all samples (one vmap over the equilibrium). A model in
+        pieces solves them only where ``phys["rod"]`` is on (one conditional for all samples)."""
         st = self.structure
+        if st.pieces == 1:
+            return self._predict(phys, inputs, st)
+        cc = Structure(st.n_wires_per_segment, 1)
+        return jax.lax.cond(phys["rod"] > 0, lambda ph: self._predict(ph, inputs, st),
+                            lambda ph: self._predict(ph, inputs, cc), phys)
+
+    @staticmethod
+    def _predict(phys, inputs, st):
         # one flag for all samples (outside the vmap): unloaded robots take the cheap path
         loaded = jnp.any(inputs["f"] != 0) | jnp.any(phys["gravity"] != 0)
         B = jax.vmap(lambda q, f, d: solve(phys, st, q, f, d, loaded=loaded))(
             inputs["q"], inputs["f"], inputs["direction"])
-        p, R = jax.vmap(lambda b: chain_tip(phys["length"], b))(B)
+        lengths = piece_lengths(phys, st)
+        p, R = jax.vmap(lambda b: chain_tip(lengths, b))(B)
         return {"p": p, "R": R}

@@ -18,12 +18,26 @@ crosses. Without friction (``mu = 0``) the problem is the energy minimisation of
 ``t`` depends on ``x`` and the equilibrium is the root of the generalised force ``F(x)`` (``grad V``
 with ``t = t(x)``), which the Newton iteration below reaches as a fixed point.
 
-**Solver.** Damped Newton on ``V`` (``t`` frozen at the iterate) with the generalised Hessian made
-positive definite (eigenvalues floored), and a branch-free line search: ten step sizes evaluated at
-once, the largest that satisfies Armijo's condition taken. ``max(s, 0)^2`` is only C1, so Newton is
-exact within a set of taut wires and the line search handles set changes. The derivatives come from
-the implicit function theorem on ``F(x*) = 0`` (``lax.custom_root``), never from the iterations.
-Per sample; ``vmap`` it.
+**Solver.** Damped Newton on ``V`` (``t`` frozen at the iterate): the backbone's and the wires'
+Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a branch-free
+line search: ten step sizes evaluated at once, the largest that satisfies Armijo's condition taken.
+``max(s, 0)^2`` is only C1, so Newton is exact within a set of taut wires and the line search
+handles set changes. The derivatives come from the implicit function theorem on ``F(x*) = 0``
+(a custom JVP), never from the iterations. Per sample; ``vmap`` it.
+
+**The rod model** (``Structure.pieces = m > 1``). Each segment's backbone is solved as ``m`` pieces of
+length ``L/m``, each of constant curvature with its own bending vector, so ``x`` has ``2 S m``
+components and the curvature may vary along a segment: the distributed weight, a tip force and
+friction make it do so, as in an elastic (Kirchhoff) rod without shear or extension, to which the
+pieces converge as ``m`` grows (``O(1/m^2)``, checked against a ``solve_bvp`` solution of the rod
+equations in the tests). It is the same energy (each piece's bending ``EI m |b_i|^2 / (2 L)``, the
+wires' stretch summed over the pieces they cross, the load integrated exactly along every piece),
+so under tendon loads alone every piece of a segment takes the same bending and the segment is
+exactly the constant-curvature one. ``curvature_freedom`` ``r_j`` (S,) in ``[0, 1]`` interpolates:
+``1`` is the rod, ``0`` pins every piece to its segment's mean bending (constant curvature, up to
+``1e-3`` of the rod's variation), by a penalty ``kappa_j |b_i - mean_j b|^2 / 2`` with ``kappa_j =
+EI_j m / L_j (1 - r_j) / (r_j + 1e-3)``; its derivative at ``r = 0`` is the rod's first-order
+variation, which is what lets the calibration score "variable curvature" like any other effect.
 
 Physical parameters are the flat dict of :meth:`Robot.params` (``length``, ``EI`` (S,);
 ``route_angles``, ``route_radii`` (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,);
@@ -42,7 +56,7 @@ import numpy as np
 
 from ._kinematics import segment_J_xb, segment_pose, segment_weight_moment, segment_weight_moment_jacobian
 from .._numerics import skew
-from ._robot import Robot, Structure, chain_poses, routing_matrix
+from ._robot import Robot, Structure, chain_poses, chain_tip, routing_matrix
 
 #: Newton iterations at most (a piecewise-quadratic problem converges in a handful; set changes and
 #: large bending take more).
@@ -50,6 +64,9 @@ MAX_ITER = 50
 #: Largest change of a bending-vector component in one Newton step (rad): far from the equilibrium
 #: of a loaded robot a Newton step can be huge; the line search then starts from this.
 MAX_STEP = 0.5
+#: ``curvature_freedom`` regularisation: at ``r = 0`` a segment's pieces deviate from their mean bending
+#: by this fraction of the rod's variation.
+_FREEDOM_EPS = 1e-3
 #: Step sizes of the line search, all evaluated at once (no value-dependent branching).
 _STEPS = 2.0 ** -np.arange(10)
 
@@ -80,17 +97,20 @@ def _guarded_norm(b):
     return jnp.where(nz, jnp.sqrt(jnp.where(nz, s, 1.0)), 0.0)
 
 
+def _pieces(lengths, B):
+    """Per segment (or piece), vectorised: base poses ``ps`` (S+1, 3), ``Rs`` (S+1, 3, 3) along the
+    chain, own end poses ``pj`` (S, 3), ``Rj`` (S, 3, 3) and first moments ``w`` (S, 3)."""
+    ps, Rs = chain_poses(lengths, B)
+    w = jax.vmap(segment_weight_moment)(lengths, B)
+    return ps, Rs, w
+
+
 def load_potential(lengths, x, f, g):
     """``-f . p_tip - g . sum_j int p ds`` (N mm) for the configuration ``x`` (2S,)."""
     B = x.reshape(-1, 2)
-    dt = x.dtype
-    p, R = jnp.zeros(3, dt), jnp.eye(3, dtype=dt)
-    moment = jnp.zeros(3, dt)
-    for j in range(B.shape[0]):
-        moment = moment + lengths[j] * p + R @ segment_weight_moment(lengths[j], B[j])
-        pj, Rj = segment_pose(lengths[j], B[j])
-        p, R = p + R @ pj, R @ Rj
-    return -jnp.dot(f, p) - jnp.dot(g, moment)
+    ps, Rs, w = _pieces(lengths, B)
+    moment = jnp.sum(lengths[:, None] * ps[:-1] + jnp.einsum("sij,sj->si", Rs[:-1], w), axis=0)
+    return -jnp.dot(f, ps[-1]) - jnp.dot(g, moment)
 
 
 def load_jacobians(lengths, x):
@@ -102,25 +122,28 @@ def load_jacobians(lengths, x):
     Jacobian ``[J_v; J_w]`` (rotated by its base rotation ``R_i``): a point ``X`` distal to it moves by
     ``J_v + omega x (X - p_{i+1})``. The tip force sees ``X = p_tip``; the weight sees each distal
     segment's first moment ``M_j = L_j p_j + R_j int p ds`` (moving like ``L_j`` points at its
-    centroid) and segment ``i``'s own ``R_i d(int p ds)/d b_i``. (No reverse-mode autodiff: the
-    load term's Hessian by differences of this compiles several times smaller.)
+    centroid) and segment ``i``'s own ``R_i d(int p ds)/d b_i``. Vectorised over the segments (the
+    distal sums are reversed cumulative sums), so a rod of many pieces compiles to the same size.
+    (No reverse-mode autodiff: the load term's Hessian by differences of this compiles several
+    times smaller.)
     """
     B = x.reshape(-1, 2)
-    S = B.shape[0]
-    ps, Rs = chain_poses(lengths, B)
-    tip = ps[-1]
-    moments = [lengths[j] * ps[j] + Rs[j] @ segment_weight_moment(lengths[j], B[j]) for j in range(S)]
-    Gt, Gm = [], []
-    for i in range(S):
-        J = segment_J_xb(lengths[i], B[i])
-        Jv, Jw = Rs[i] @ J[:3], Rs[i] @ J[3:]
-        end = ps[i + 1]
-        L_out = sum((lengths[j] for j in range(i + 1, S)), jnp.zeros((), x.dtype))
-        M_out = sum((moments[j] for j in range(i + 1, S)), jnp.zeros(3, x.dtype))
-        Gt.append(Jv - skew(tip - end) @ Jw)
-        Gm.append(L_out * Jv - skew(M_out - L_out * end) @ Jw
-                  + Rs[i] @ segment_weight_moment_jacobian(lengths[i], B[i]))
-    return jnp.concatenate(Gt, axis=1), jnp.concatenate(Gm, axis=1)
+    ps, Rs, w = _pieces(lengths, B)
+    R0, tip, ends = Rs[:-1], ps[-1], ps[1:]
+    moments = lengths[:, None] * ps[:-1] + jnp.einsum("sij,sj->si", R0, w)  # (S, 3)
+
+    def distal(a):  # sum over j > i, (S, ...)
+        c = jnp.cumsum(a[::-1], axis=0)[::-1]
+        return jnp.concatenate([c[1:], jnp.zeros_like(c[:1])], axis=0)
+
+    L_out, M_out = distal(lengths), distal(moments)
+    J = jax.vmap(segment_J_xb)(lengths, B)  # (S, 6, 2)
+    Jv, Jw = jnp.einsum("sij,sjk->sik", R0, J[:, :3]), jnp.einsum("sij,sjk->sik", R0, J[:, 3:])
+    cross = jax.vmap(lambda a, m: skew(a) @ m)
+    Gt = Jv - cross(tip[None, :] - ends, Jw)
+    Gm = (L_out[:, None, None] * Jv - cross(M_out - L_out[:, None] * ends, Jw)
+          + jnp.einsum("sij,sjk->sik", R0, jax.vmap(segment_weight_moment_jacobian)(lengths, B)))
+    return jnp.concatenate(list(Gt), axis=1), jnp.concatenate(list(Gm), axis=1)
 
 
 def load_gradient(lengths, x, f, g):
@@ -165,16 +188,36 @@ class _Sample:
     only the load's Jacobians, not their change with the configuration)."""
 
     def __init__(self, phys, structure: Structure, q, f, direction, loaded):
-        self.A = routing_matrix(phys["route_angles"], phys["route_radii"], structure.crosses)  # (N, 2S)
+        m = structure.pieces
+        L = phys["length"]
+        ra, rr = phys["route_angles"], phys["route_radii"]
+        if m > 1:  # every piece crossed at its segment's routing
+            ra, rr = jnp.repeat(ra, m, axis=1), jnp.repeat(rr, m, axis=1)
+        self.A = routing_matrix(ra, rr, structure.piece_crosses)  # (N, 2P)
         self.k = phys["wire_stiffness"]
         self.c = -q + phys["preload"] / self.k  # s = A x + c
-        self.E = jnp.repeat(phys["EI"] / phys["length"], 2)
-        self.lengths = phys["length"]
+        stiff = phys["EI"] * m / L  # (S,) one piece's EI / length
+        self.E = jnp.repeat(stiff, 2 * m)
+        self.lengths = jnp.repeat(L / m, m)  # (P,)
+        self.m = m
+        if m > 1:
+            r = phys["curvature_freedom"]
+            self.kappa = jnp.repeat(stiff * (1.0 - r) / (r + _FREEDOM_EPS), 2 * m)
+            S = L.shape[0]
+            avg = np.kron(np.eye(S), np.kron(np.full((m, m), 1.0 / m), np.eye(2)))
+            self.D = jnp.asarray(np.eye(2 * S * m) - avg, self.A.dtype)  # deviation from the segment mean
         self.f, self.g = f, phys["gravity"]
         self.mu = phys["friction"]
         self.direction = direction
-        self.crosses = jnp.asarray(structure.crosses, self.A.dtype)
+        self.crosses = jnp.asarray(structure.piece_crosses, self.A.dtype)
         self.loaded = loaded
+
+    def _deviation(self, x):
+        """``kappa * (x - segment mean)`` (2P,): the curvature-freedom penalty's gradient (0 if m = 1)."""
+        if self.m == 1:
+            return jnp.zeros_like(x)
+        X = x.reshape(-1, self.m, 2)
+        return self.kappa * (X - X.mean(axis=1, keepdims=True)).reshape(-1)
 
     def _if_loaded(self, fn, x, zero):
         return jax.lax.cond(self.loaded, fn, lambda _: zero, x)
@@ -190,7 +233,8 @@ class _Sample:
     def value(self, x, t):
         s = self.stretch(x)
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
-        return 0.5 * jnp.dot(self.E * x, x) + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
+        elastic = 0.5 * jnp.dot(self.E * x + self._deviation(x), x)
+        return elastic + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
 
     def load_grad(self, x):
         return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
@@ -198,7 +242,7 @@ class _Sample:
     def grad(self, x, t, load_grad=None):
         tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
         load = self.load_grad(x) if load_grad is None else load_grad
-        return self.E * x + self.A.T @ tau + load
+        return self.E * x + self._deviation(x) + self.A.T @ tau + load
 
     def _load_hessian(self, x):
         """The load term's Hessian by central differences of its closed-form gradient: accurate to
@@ -227,7 +271,8 @@ class _Sample:
         it at a few more iterations, each much cheaper (no differences of the load's gradient, a
         Cholesky solve instead of an eigendecomposition)."""
         taut = (self.stretch(x) > 0).astype(x.dtype)
-        return jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A
+        H = jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A
+        return H if self.m == 1 else H + self.kappa[:, None] * self.D
 
     def force(self, x):
         """The generalised force ``F(x)`` whose root is the equilibrium (``t`` depends on ``x``).
@@ -245,7 +290,7 @@ class _Sample:
             Gt, Gm = jax.lax.stop_gradient(load_jacobians(self.lengths, y))
             return -(Gt.T @ self.f + Gm.T @ self.g)
 
-        return self.E * x + self.A.T @ tau + jax.lax.cond(self.loaded, loaded, unloaded, x)
+        return self.E * x + self._deviation(x) + self.A.T @ tau + jax.lax.cond(self.loaded, loaded, unloaded, x)
 
     def force_jacobian(self, x):
         """``dF/dx`` (2S, 2S): :meth:`hess` plus the friction share's own change with the bending,
@@ -329,8 +374,10 @@ def _solver(structure: Structure):
 
 
 def solve(phys, structure: Structure, q, f, direction=None, x0=None, loaded=None):
-    """Equilibrium bending vectors ``B*`` (S, 2) of one sample, implicitly differentiable in ``phys``,
-    ``q``, ``f`` (the initial guess ``x0`` (2S,) is not differentiated).
+    """Equilibrium bending vectors ``B*`` (P, 2) of one sample, one per piece (``P = S m``, pieces of
+    segment ``j`` at rows ``j m .. j m + m - 1``; ``m = structure.pieces``, 1: one per segment),
+    implicitly differentiable in ``phys``, ``q``, ``f`` (the initial guess ``x0`` (2P,) is not
+    differentiated). The tip is ``chain_tip(piece_lengths(phys, structure), B*)``.
 
     Args: ``phys`` the physical parameters (:meth:`Robot.params` form); ``q`` (N,) commanded wire
     displacements (mm); ``f`` (3,) tip force (N, base frame); ``direction`` (N,) the wires' last
@@ -345,9 +392,21 @@ def solve(phys, structure: Structure, q, f, direction=None, x0=None, loaded=None
     direction = jnp.zeros_like(q) if direction is None else jnp.asarray(direction, dt)
     if loaded is None:
         loaded = jnp.any(f != 0) | jnp.any(phys["gravity"] != 0)
-    S = structure.n_segments
-    x0 = jnp.zeros(2 * S, dt) if x0 is None else jax.lax.stop_gradient(jnp.asarray(x0, dt).reshape(-1))
-    return _solver(structure)(phys, q, f, direction, jax.lax.stop_gradient(loaded), x0).reshape(S, 2)
+    P = structure.n_pieces
+    x0 = jnp.zeros(2 * P, dt) if x0 is None else jax.lax.stop_gradient(jnp.asarray(x0, dt).reshape(-1))
+    return _solver(structure)(phys, q, f, direction, jax.lax.stop_gradient(loaded), x0).reshape(P, 2)
+
+
+def piece_lengths(phys, structure: Structure):
+    """``(P,)`` the pieces' lengths (mm): each segment's length over its ``m`` pieces."""
+    m = structure.pieces
+    return phys["length"] if m == 1 else jnp.repeat(phys["length"] / m, m)
+
+
+def segment_bending(B, structure: Structure):
+    """``(S, 2)`` each segment's total bending vector from the pieces' ``B`` (P, 2) (their sum: exact
+    for constant curvature, the mean curvature times the length for the rod)."""
+    return B.reshape(structure.n_segments, structure.pieces, 2).sum(axis=1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -361,19 +420,30 @@ def _phys(robot: Robot, load: Load | None):
     return phys, f
 
 
-def equilibrium(robot: Robot, q, load: Load | None = None, B0=None):
-    """Equilibrium bending vectors ``B*`` (S, 2) for one sample of wire displacements ``q`` (N,).
+def _structure(robot: Robot, pieces: int) -> Structure:
+    if not isinstance(pieces, int) or isinstance(pieces, bool) or pieces < 1:
+        raise ValueError(f"pieces must be a positive integer, got {pieces!r}")
+    return Structure(robot.n_wires_per_segment, pieces)
+
+
+def equilibrium(robot: Robot, q, load: Load | None = None, B0=None, pieces: int = 1):
+    """Equilibrium bending vectors for one sample of wire displacements ``q`` (N,): ``(S, 2)``, one
+    per segment, with ``pieces=1`` (constant curvature); ``(S * pieces, 2)``, one per piece, for the
+    rod model (each segment solved as ``pieces`` constant-curvature pieces, see the module notes).
 
     Differentiable in ``robot``, ``q`` and ``load`` by the implicit function theorem, forward and
-    reverse mode. ``vmap`` it over samples.
+    reverse mode. ``vmap`` it over samples. ``pieces`` is static (a shape).
     """
     phys, f = _phys(robot, load)
-    return solve(phys, robot.structure, q, f, x0=B0)
+    return solve(phys, _structure(robot, pieces), q, f, x0=B0)
 
 
-def forward(robot: Robot, q, load: Load | None = None):
-    """Commanded wire displacements (N,) -> equilibrium tip position (3,) and rotation (3, 3)."""
-    return robot.tip_pose(equilibrium(robot, q, load))
+def forward(robot: Robot, q, load: Load | None = None, pieces: int = 1):
+    """Commanded wire displacements (N,) -> equilibrium tip position (3,) and rotation (3, 3);
+    ``pieces > 1``: the rod model (see :func:`equilibrium`)."""
+    st = _structure(robot, pieces)
+    phys, f = _phys(robot, load)
+    return chain_tip(piece_lengths(phys, st), solve(phys, st, q, f))
 
 
 def wire_stretch(robot: Robot, B, q):

@@ -39,10 +39,13 @@ from ._zones import BOUNDARY_TOL, TEMPERATURE
 
 @dataclasses.dataclass(frozen=True)
 class Structure:
-    """The static part of a robot: the wire count of each segment (proximal first). Hashable, so a
-    compiled function depends on it and on nothing else of the robot."""
+    """The static part of a robot: the wire count of each segment (proximal first) and the number of
+    constant-curvature pieces each segment's backbone is solved as (1: constant curvature; more: the
+    rod model of :mod:`._equilibrium`). Hashable, so a compiled function depends on it and on nothing
+    else of the robot."""
 
     n_wires_per_segment: tuple
+    pieces: int = 1
 
     @property
     def n_segments(self) -> int:
@@ -61,6 +64,15 @@ class Structure:
     def crosses(self) -> np.ndarray:
         """``(N, S)`` bool: wire ``k`` runs through segment ``j`` (``j <= owner(k)``)."""
         return np.arange(self.n_segments)[None, :] <= self.owner[:, None]
+
+    @property
+    def n_pieces(self) -> int:
+        return self.n_segments * self.pieces
+
+    @functools.cached_property
+    def piece_crosses(self) -> np.ndarray:
+        """``(N, S m)`` bool: wire ``k`` runs through piece ``i`` (piece ``i`` of segment ``i // m``)."""
+        return np.repeat(self.crosses, self.pieces, axis=1)
 
 
 # --------------------------------------------------------------------------------------------
@@ -244,9 +256,12 @@ class Robot:
     def params(self) -> dict:
         """The physical parameters as a flat dict of arrays, the form the equilibrium and the
         calibration effects work on: ``length``, ``EI`` (S,); ``route_angles``, ``route_radii``
-        (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,) and ``gravity`` (3,), zero."""
+        (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,) and ``gravity`` (3,), zero;
+        ``curvature_freedom`` (S,), one (a segment solved in pieces is an elastic rod, see
+        :mod:`._equilibrium`)."""
         dt = self.route_angles.dtype
         return {"length": self.lengths.astype(dt), "EI": self.backbone_EI.astype(dt),
+                "curvature_freedom": jnp.ones(self.n_segments, dt),
                 "route_angles": self.route_angles, "route_radii": self.route_radii,
                 "wire_stiffness": self.wire_stiffness.astype(dt), "preload": self.preload.astype(dt),
                 "friction": jnp.zeros(2, dt), "gravity": jnp.zeros(3, dt)}

@@ -30,6 +30,9 @@ class Effect:
     name = "effect"
     #: one line for the report: what the effect is physically
     doc = ""
+    #: True for an effect that switches the model's solver when it is on (its parameters have no
+    #: sensitivity while it is off): the score test then evaluates the Jacobian with it on, at null
+    scored_on = False
 
     # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
     def size(self, model, phys0) -> int:

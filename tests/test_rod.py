@@ -1,0 +1,156 @@
+"""The rod model: each segment solved as constant-curvature pieces in the one equilibrium, checked
+against the independent Kirchhoff-rod solver of ``tests/reference_rod.py`` (SciPy's solve_bvp)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import reference_rod as rr
+
+import tension_zones as tz
+from tension_zones.model import Load
+from tension_zones.model import _equilibrium as E
+from tension_zones.model._robot import Structure, chain_tip
+
+SEG = tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)
+Q = jnp.array([-3.0, 0.5, 0.5])
+
+
+def solved(robot, q, load, m, freedom=None):
+    """Tip position, piece bending vectors and the wires' tensions (N) of the package's solution."""
+    phys = robot.params()
+    phys["gravity"] = jnp.asarray(load.gravity, float)
+    if freedom is not None:
+        phys["curvature_freedom"] = jnp.asarray(freedom, float)
+    st = Structure(robot.n_wires_per_segment, m)
+    B = E.solve(phys, st, q, load.tip_force)
+    p, _ = chain_tip(E.piece_lengths(phys, st), B)
+    sm = E._Sample(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.zeros(robot.n_wires),
+                   jnp.asarray(True))
+    tau = np.asarray(sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0))
+    return np.asarray(p), np.asarray(B), tau
+
+
+def test_tendons_alone_give_constant_curvature_exactly():
+    robot = tz.Robot(SEG)
+    p1, B1, _ = solved(robot, Q, Load.none(), 1)
+    p4, B4, _ = solved(robot, Q, Load.none(), 4)
+    np.testing.assert_allclose(p4, p1, atol=1e-9)
+    np.testing.assert_allclose(B4, np.repeat(B1 / 4, 4, axis=0), atol=1e-10)  # every piece a quarter
+    assert np.isclose(np.asarray(tz.forward(robot, Q, pieces=4)[0]), p1, atol=1e-9).all()
+
+
+@pytest.mark.parametrize("load", [Load(jnp.zeros(3), jnp.array([0.0, 0.0, -0.003])),
+                                  Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0]))])
+def test_weight_converges_to_the_rod_at_second_order(load):
+    """Planar: the rod (solve_bvp, same tendon tensions) is reached as O(1/m^2)."""
+    robot = tz.Robot(SEG)
+    errs = []
+    for m in (2, 4, 8):
+        p, _, tau = solved(robot, Q, load, m)
+        ref = rr.solve_segment(60.0, 2454.0, np.asarray(SEG.wire_angles), 4.5, tau, weight=np.asarray(load.gravity))
+        errs.append(np.linalg.norm(p - ref.tip_position))
+    assert errs[2] < 0.01 and errs[0] / errs[2] > 10  # ~16 for second order
+    p1, _, tau = solved(robot, Q, load, 1)
+    ref = rr.solve_segment(60.0, 2454.0, np.asarray(SEG.wire_angles), 4.5, tau, weight=np.asarray(load.gravity))
+    assert np.linalg.norm(p1 - ref.tip_position) > 5 * errs[2]  # constant curvature is further off
+
+
+def test_tip_force_and_weight_in_3d_match_a_torsion_free_rod():
+    """A lateral tip force on a bent segment: our pieces carry no twist, so they converge to the rod
+    with a rigid torsion (GJ large); a solid rod's twist is a stated limit of the model."""
+    robot = tz.Robot(SEG)
+    load = Load(jnp.array([0.0, 0.4, -0.2]), jnp.array([0.002, 0.0, -0.002]))
+    p, _, tau = solved(robot, Q, load, 16)
+    ref = rr.solve_segment(60.0, 2454.0, np.asarray(SEG.wire_angles), 4.5, tau, weight=np.asarray(load.gravity),
+                           tip_force=np.asarray(load.tip_force), GJ=1e9)
+    assert np.linalg.norm(p - ref.tip_position) < 0.02
+
+
+def test_two_segments_under_weight_match_the_rod():
+    robot = tz.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), wire_stiffness=30.0,
+                                backbone_EI=1500.0),
+                      tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), wire_stiffness=80.0,
+                                backbone_EI=3000.0)])
+    q = jnp.array([-1.5, 0.4, 0.4, 0.3, -1.0, 0.3, 0.3])
+    load = Load(jnp.zeros(3), jnp.array([0.0, 0.002, -0.003]))
+    p, _, tau = solved(robot, q, load, 8)
+    segs = [rr.Segment(45.0, 1500.0, tuple(np.radians([10, 130, 250])), 3.5, tuple(tau[:3]), GJ=1e9),
+            rr.Segment(70.0, 3000.0, tuple(np.radians([45, 135, 215, 315])), 5.0, tuple(tau[3:]), GJ=1e9)]
+    ref = rr.solve_rod(segs, weight=np.asarray(load.gravity))
+    p1, _, _ = solved(robot, q, load, 1)
+    assert np.linalg.norm(p - ref.tip_position) < 0.05 < np.linalg.norm(p1 - ref.tip_position)
+
+
+def test_curvature_freedom_interpolates_with_a_first_order_derivative_at_zero():
+    robot = tz.Robot(SEG)
+    load = Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0]))
+    p_cc, _, _ = solved(robot, Q, load, 1)
+    p_rod, _, _ = solved(robot, Q, load, 4)
+    p0, _, _ = solved(robot, Q, load, 4, freedom=[0.0])
+    dev = np.linalg.norm(p_rod - p_cc)
+    assert dev > 0.05 and np.linalg.norm(p0 - p_cc) < 2e-3 * dev
+
+    def tip(r):
+        phys = robot.params()
+        phys.update(gravity=load.gravity, curvature_freedom=r)
+        st = Structure((3,), 4)
+        return chain_tip(E.piece_lengths(phys, st), E.solve(phys, st, Q, load.tip_force))[0]
+
+    d0 = np.asarray(jax.jacfwd(tip)(jnp.zeros(1)))[:, 0]
+    # the first-order variation points from constant curvature toward the rod
+    assert np.dot(d0, p_rod - p_cc) > 0.5 * np.linalg.norm(d0) * dev
+
+
+def test_straight_pose_values_and_gradients_finite_and_vmapped():
+    robot = tz.Robot(SEG)
+    load = Load(jnp.zeros(3), jnp.array([0.0, 0.0, -0.003]))
+
+    def tip(q, g, r):
+        phys = robot.params()
+        phys.update(gravity=g, curvature_freedom=r)
+        st = Structure((3,), 4)
+        return chain_tip(E.piece_lengths(phys, st), E.solve(phys, st, q, jnp.zeros(3)))[0]
+
+    for g in (jnp.zeros(3), load.gravity):
+        for r in (jnp.zeros(1), jnp.ones(1)):
+            z = jnp.zeros(3)
+            assert np.all(np.isfinite(np.asarray(tip(z, g, r))))
+            for J in jax.jacfwd(tip, argnums=(0, 1, 2))(z, g, r):
+                assert np.all(np.isfinite(np.asarray(J)))
+            assert np.all(np.isfinite(np.asarray(jax.grad(lambda q: tip(q, g, r)[0])(z))))
+    qs = jnp.asarray(np.random.default_rng(0).uniform(-2, 0.5, (5, 3)))
+    batch = jax.vmap(lambda q: tip(q, load.gravity, jnp.ones(1)))(qs)
+    np.testing.assert_allclose(batch[3], tip(qs[3], load.gravity, jnp.ones(1)), atol=1e-10)
+
+
+def test_new_values_never_recompile():
+    robot = tz.Robot(SEG)
+    f = jax.jit(lambda rob, q, load: tz.forward(rob, q, load, pieces=4))
+    f(robot, Q, Load.none())
+    n = f._cache_size()
+    for g, ei in ((0.001, 2000.0), (0.004, 3000.0)):
+        rob = tz.Robot(tz.Design(3, 55.0, 4.0, wire_stiffness=40.0, backbone_EI=ei))
+        f(rob, Q, Load(jnp.array([0.1, 0.0, 0.0]), jnp.array([0.0, 0.0, -g])))
+    assert f._cache_size() == n
+
+
+def test_pieces_must_be_a_positive_integer():
+    with pytest.raises(ValueError, match="pieces must be a positive integer"):
+        tz.forward(tz.Robot(SEG), Q, pieces=0)
+
+
+@pytest.mark.slow
+def test_a_large_rod_batch_runs_to_the_end():
+    """Regression: XLA's concurrency-optimised CPU scheduler hung this (1000 samples of a
+    three-segment robot in pieces: every thread idle); the package turns it off (_config)."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np, jax, jax.numpy as jnp, tension_zones as tz\n"
+            "r = tz.Robot.from_json(tz.example_path('ftdcr_v4/design.json'))\n"
+            "Q = jnp.asarray(np.random.default_rng(0).uniform(-2, 0.5, (1000, 9)))\n"
+            "p = jax.jit(jax.vmap(lambda q: tz.forward(r, q, pieces=4)[0]))(Q)\n"
+            "print(bool(np.all(np.isfinite(np.asarray(p)))))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240, check=False)
+    assert out.returncode == 0 and out.stdout.strip() == "True", out.stderr[-2000:]
