@@ -54,7 +54,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._kinematics import segment_J_xb, segment_pose, segment_weight_moment, segment_weight_moment_jacobian
+from ._kinematics import segment_J_xb, segment_weight_moment, segment_weight_moment_jacobian
 from .._numerics import skew
 from ._robot import Robot, Structure, chain_poses, chain_tip, routing_matrix
 
