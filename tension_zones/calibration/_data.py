@@ -251,6 +251,15 @@ def _wire_columns(name: str, header: list[str]) -> list[str]:
     return qs
 
 
+def pattern_family(label: str) -> str:
+    """The family of a pattern label: its words without the repetition, direction, hold and numbers
+    (``rep1_all3_same_dir60_hold`` -> ``all_same``, ``rep2_seg1_dir120`` -> ``seg``,
+    ``rep1_tendon4_id2_pull`` -> ``tendon_id_pull``); a label of numbers only is its own family."""
+    words = [w for w in str(label).split("_") if not re.fullmatch(r"rep\d+|dir-?\d+(\.\d+)?|hold\d*", w)]
+    fam = "_".join(w for w in (re.sub(r"\d+", "", w) for w in words) if w)
+    return fam or str(label)
+
+
 def read_csv(path, n_wires: int | None = None, length: float | None = None, drop_bad: bool = False) -> Dataset:
     """Read and validate a MODEL.md Sec. 6 measurement set (positions in the base frame).
 

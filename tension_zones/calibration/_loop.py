@@ -36,7 +36,7 @@ import numpy as np
 
 from ..model import Design, Robot
 from ._baselines import baselines
-from ._data import Dataset
+from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._model import RobotModel
 from ._problem import Problem, correlations, parameter_std
@@ -361,11 +361,17 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
               "train_after": rmse(r_after[train])}
     steps = []
+    families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
     for act, th in models:  # the validation file, predicted only now, for every accepted model
         rr = pb.residuals(th, act)
-        steps.append({"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
-                      "rmse_validate_mm": rmse(rr[val]) if val.any() else None,
-                      "rmse_validate_aligned_mm": rmse_aligned(rr[val]) if val.any() else None})
+        step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
+                "rmse_validate_mm": rmse(rr[val]) if val.any() else None,
+                "rmse_validate_aligned_mm": rmse_aligned(rr[val]) if val.any() else None}
+        if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
+            step["rmse_by_family_mm"] = {
+                part: {f: rmse(rr[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
+                for part, mask in (("held_out", held), ("validate", val)) if mask.any()}
+        steps.append(step)
     bl = None
     if val.any():
         rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_after[val]), rmse_aligned(r_after[val])

@@ -165,6 +165,12 @@ def markdown(report: dict) -> str:
                      + (f" {_f(s['rmse_validate_mm'])} | {_f(s['rmse_validate_aligned_mm'])} |" if val else ""))
     lines += [f"| noise floor ({report['noise']['method']}, {report['noise']['pairs']} pairs) | {nf:.4f} | 1 |"
               + (" | |" if val else ""), ""]
+    fam = report["steps"][-1].get("rmse_by_family_mm") if report["steps"] else None
+    if fam:
+        lines += ["By pattern family (the final model; tip-position RMSE, mm):", "", "| part | family | RMSE |",
+                  "| --- | --- | ---: |"]
+        lines += [f"| {part} | {f} | {_f(v)} |" for part, rows in fam.items() for f, v in rows.items()]
+        lines.append("")
     if val and report.get("baselines"):
         lines += ["Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the "
                   "training data):", "", "| baseline | choice | held out | validation | validation aligned |",
