@@ -77,13 +77,15 @@ def main(argv=None):
     p.add_argument("--json", help="write the numbers to this JSON file")
     p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
     p.add_argument("--only", choices=("new", "baseline"), help="run one side only")
+    p.add_argument("--keep", help="keep this code's report folders under this folder")
     args = p.parse_args(argv)
     res = {"started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_at_start": load(), "rows": []}
     for side, root in (("this code", ROOT), ("baseline", Path(args.baseline).resolve())):
         if args.only and (args.only == "new") != (side == "this code"):
             continue
         with tempfile.TemporaryDirectory() as tmp:
-            for name, cli in cases(Path(tmp)).items():
+            out = Path(args.keep) if args.keep and side == "this code" else Path(tmp)
+            for name, cli in cases(out).items():
                 print(f"[{side}] {name} ...", flush=True)
                 r = run(root, cli)
                 r.update(side=side, case=name, load=load())

@@ -58,13 +58,54 @@ def _files(tmp):
         "arc_fixed": {"forbidden_arc_deg": [10, 50]},
     }.items():
         (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
+    # calibration inputs, cut from the shipped examples
+    design = json.loads(tz.example_path("synthetic/nominal_3w.design.json").read_text())
+    (tmp / "d3.json").write_text(json.dumps(design))
+    (tmp / "d3_nstr.json").write_text(json.dumps({**design, "n_wires": "3"}))
+    rows = tz.example_path("synthetic/nominal_3w.csv").read_text().splitlines()
+    (tmp / "cal.csv").write_text("\n".join(rows[:81]) + "\n")
+    (tmp / "short.csv").write_text("\n".join(rows[:15]) + "\n")
+    cells = rows[5].split(",")
+    cells[2] = "abc"
+    (tmp / "nonnum.csv").write_text("\n".join(rows[:5] + [",".join(cells)] + rows[6:81]) + "\n")
+    train = tz.example_path("ftdcr_v4/train.csv").read_text()
+    (tmp / "opencr.csv").write_text("\n".join(train.splitlines()[:60]) + "\n")
+    (tmp / "truncated.csv").write_text(train[:3000])
+    (tmp / "ftdcr.json").write_text(tz.example_path("ftdcr_v4/design.json").read_text())
+    (tmp / "report").mkdir()
+    (tmp / "report" / "report.json").write_text('{"earlier": true}')
+    (tmp / "data_dir").mkdir()
 
 
 SWEEP = ["sweep", "--wires", "3", "--length", "20", "--pitch-radius", "2"]
 COMPLIANCE = SWEEP + ["--compliance", "--wire-stiffness", "75", "--backbone-EI", "1200", "--load", "5,0,0"]
 OPT = ["optimize", "--scenario"]
 
+CAL = ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3.json"]
+
 CLI = [
+    # calibrate: data, design and output checked before the fit
+    ("cal-opencr-without-format", ["calibrate", "{tmp}/opencr.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "looks like an OpenCR recording"),
+    ("cal-design-n-wires-string", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_nstr.json", "--out", "{tmp}/o"],
+     "n_wires must be an integer of at least 3, got '3' (a string)"),
+    ("cal-data-is-folder", ["calibrate", "{tmp}/data_dir", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "is a folder, not a file"),
+    ("cal-truncated-opencr", ["calibrate", "{tmp}/truncated.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json",
+                              "--out", "{tmp}/o"], "is the file truncated?"),
+    ("cal-non-numeric-cell", ["calibrate", "{tmp}/nonnum.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "'abc' is not a number"),
+    ("cal-missing-design", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/nowhere.json", "--out", "{tmp}/o"],
+     "does not exist"),
+    ("cal-missing-data", ["calibrate", "{tmp}/nowhere.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "nowhere.csv"),
+    ("cal-unknown-effect", CAL + ["--effects", "nonsense", "--out", "{tmp}/o"], "unknown effect 'nonsense'"),
+    ("cal-holdout-out-of-range", CAL + ["--holdout", "1.5", "--out", "{tmp}/o"], "--holdout must be between 0 and 1"),
+    ("cal-unknown-format", CAL + ["--format", "xml", "--out", "{tmp}/o"], "invalid choice: 'xml'"),
+    ("cal-too-few-samples", ["calibrate", "{tmp}/short.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "need at least 10"),
+    ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
+    ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
     # usage errors (argparse): one line too
     ("no-command", [], "the following arguments are required: COMMAND"),
     ("unknown-command", ["frobnicate"], "invalid choice: 'frobnicate'"),
