@@ -396,9 +396,10 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0):
     return P + rng.normal(0.0, truth.noise, P.shape)
 
 
-def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bool = True):
+def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bool = True, steps: int = 10):
     """``NAME_train.csv`` (and ``NAME_val.csv``) in the OpenCR format, servo columns in id order
-    with servo ids shuffled against the tendons, and ``NAME.design.json`` (the declared design).
+    with servo ids shuffled against the tendons, and ``NAME.design.json`` (the declared design);
+    ``steps``: samples per half pattern (out, back).
     Returns the paths ``(train, val or None, design)``."""
     folder = Path(folder)
     rng = np.random.default_rng(seed)
@@ -417,8 +418,8 @@ def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bo
         path.write_text("\n".join(lines) + "\n")
         return path
 
-    train = write(folder / f"{name}_train.csv", robot_patterns(truth.design, rng, servos=servos), 100.0)
-    v = write(folder / f"{name}_val.csv", robot_patterns(truth.design, rng, val=True), 5000.0) if val else None
+    train = write(folder / f"{name}_train.csv", robot_patterns(truth.design, rng, servos=servos, steps=steps), 100.0)
+    v = write(folder / f"{name}_val.csv", robot_patterns(truth.design, rng, val=True, steps=steps), 5000.0) if val else None
     design = folder / f"{name}.design.json"
     design.write_text(json.dumps(truth.design))
     return train, v, design

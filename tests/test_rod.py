@@ -110,18 +110,20 @@ def test_straight_pose_values_and_gradients_finite_and_vmapped():
         phys = robot.params()
         phys.update(gravity=g, curvature_freedom=r)
         st = Structure((3,), 4)
-        return chain_tip(E.piece_lengths(phys, st), E.solve(phys, st, q, jnp.zeros(3)))[0]
+        return chain_tip(E.piece_lengths(phys, st), E.solve(phys, st, q, jnp.zeros(3), loaded=jnp.asarray(True)))[0]
 
-    for g in (jnp.zeros(3), load.gravity):
+    value = jax.jit(tip)
+    jac = jax.jit(jax.jacfwd(tip, argnums=(0, 1, 2)))
+    grad = jax.jit(jax.grad(lambda q, g, r: tip(q, g, r)[0]))
+    z = jnp.zeros(3)
+    for g in (jnp.zeros(3), load.gravity):  # unloaded and loaded, rod and constant curvature: one program each
         for r in (jnp.zeros(1), jnp.ones(1)):
-            z = jnp.zeros(3)
-            assert np.all(np.isfinite(np.asarray(tip(z, g, r))))
-            for J in jax.jacfwd(tip, argnums=(0, 1, 2))(z, g, r):
-                assert np.all(np.isfinite(np.asarray(J)))
-            assert np.all(np.isfinite(np.asarray(jax.grad(lambda q: tip(q, g, r)[0])(z))))
+            assert np.all(np.isfinite(np.asarray(value(z, g, r))))
+            assert all(np.all(np.isfinite(np.asarray(J))) for J in jac(z, g, r))
+            assert np.all(np.isfinite(np.asarray(grad(z, g, r))))
     qs = jnp.asarray(np.random.default_rng(0).uniform(-2, 0.5, (5, 3)))
-    batch = jax.vmap(lambda q: tip(q, load.gravity, jnp.ones(1)))(qs)
-    np.testing.assert_allclose(batch[3], tip(qs[3], load.gravity, jnp.ones(1)), atol=1e-10)
+    batch = jax.vmap(lambda q: value(q, load.gravity, jnp.ones(1)))(qs)
+    np.testing.assert_allclose(batch[3], value(qs[3], load.gravity, jnp.ones(1)), atol=1e-10)
 
 
 def test_new_values_never_recompile():
