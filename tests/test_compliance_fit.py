@@ -1,6 +1,5 @@
 """The identification machinery of paper Sec. 6.2 (the full fit runs in test_reproduce)."""
 
-import numpy as np
 import pytest
 
 from tension_zones.paper import _identify as cf

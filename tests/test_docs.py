@@ -26,4 +26,4 @@ def test_docs_build_strict(tmp_path):
                         "api/calibration": ("calibrate", "read_opencr", "Dataset", "backlash"),
                         "api/paper": ("reproduce",)}.items():
         for name in names:
-            assert f'id="tension_zones.' in pages[page] and name in pages[page], (page, name)
+            assert 'id="tension_zones.' in pages[page] and name in pages[page], (page, name)

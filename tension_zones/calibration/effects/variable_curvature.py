@@ -26,8 +26,8 @@ class VariableCurvature(Effect):
     doc = ("curvature varying along each segment as in an elastic rod under the loads (0 = constant "
            "curvature, 1 = elastic rod)")
     #: the calibration model solves each segment as this many constant-curvature pieces when this
-    #: effect is among its candidates (tip error against the converged rod: under 0.01 mm for a 60 mm
-    #: segment under its weight, 0.2 mm under a lateral tip force of 0.4 N; see model/README.md)
+    #: effect is among its candidates (tip error against the rod for a bent 60 mm segment: 0.04 mm
+    #: under a lateral weight of 0.003 N/mm, 0.2 mm with a 0.4 N lateral tip force; model/README.md)
     pieces = 4
     scored_on = True
 
