@@ -108,7 +108,7 @@ def test_a_rod_under_its_weight_is_named_variable_curvature_not_geometry(tmp_pat
     own code path) under its weight: constant curvature cannot fit it; the loop must name the weight
     and the varying curvature (not geometry or a registration standing in), recover the weight, and
     predict the validation file at the noise."""
-    rep = run(tmp_path, "rod", RobotTruth(gravity=(0.0, 0.002, -0.003), pieces=6), steps=7)
+    rep = run(tmp_path, "rod", RobotTruth(gravity=(0.0, 0.002, -0.003), pieces=6), steps=6)
     assert sorted(names(rep)) == ["gravity", "variable_curvature"]
     floor = rep["noise_floor_mm"]
     assert rep["rmse_before_mm"] > 10 * floor
