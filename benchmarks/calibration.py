@@ -96,12 +96,9 @@ def main(argv=None):
     md = markdown(res)
     print(md)
     if not args.no_readme:
-        path = HERE / "README.md"
-        text = path.read_text()
-        a, b = "<!-- CALIBRATION START -->", "<!-- CALIBRATION END -->"
-        head, rest = text.split(a, 1)
-        _, tail = rest.split(b, 1)
-        path.write_text(f"{head}{a}\n{md}\n{b}{tail}")
+        from _readme import write_section
+
+        write_section("CALIBRATION", md)
 
 
 def markdown(res) -> str:

@@ -119,14 +119,9 @@ def main(argv=None):
     md = "\n".join(lines)
     print(md)
     if not args.no_readme:
-        path = HERE / "README.md"
-        text = path.read_text()
-        a, b = "<!-- ROD START -->", "<!-- ROD END -->"
-        if a not in text:
-            text += f"\n## The rod model\n\n{a}\n{b}\n"
-        head, rest = text.split(a, 1)
-        _, tail = rest.split(b, 1)
-        path.write_text(f"{head}{a}\n{md}\n{b}{tail}")
+        from _readme import write_section
+
+        write_section("ROD", md, title="The rod model")
 
 
 if __name__ == "__main__":

@@ -273,12 +273,9 @@ def markdown(res) -> str:
 
 
 def write_readme(md: str):
-    path = HERE / "README.md"
-    text = path.read_text()
-    a, b = "<!-- RESULTS START -->", "<!-- RESULTS END -->"
-    head, rest = text.split(a, 1)
-    _, tail = rest.split(b, 1)
-    path.write_text(f"{head}{a}\n{md}\n{b}{tail}")
+    from _readme import write_section
+
+    write_section("RESULTS", md)
 
 
 _CALIB_CHILD = textwrap.dedent("""
