@@ -18,10 +18,9 @@ if "jax" in sys.modules:
 else:
     if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
         os.environ.setdefault("JAX_ENABLE_X64", "1")
-    if "--xla_cpu_enable_concurrency_optimized_scheduler" not in os.environ.get("XLA_FLAGS", ""):
-        # see _config: XLA's CPU scheduler can hang the large vmapped while loops
-        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "")
-                                   + " --xla_cpu_enable_concurrency_optimized_scheduler=false").strip()
+    from ._xla import with_scheduler_off
+
+    os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))  # see _xla
 
 __version__ = "0.1.0"
 

@@ -21,14 +21,8 @@ import os
 
 import jax
 
-_SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
-
-
-def xla_flags(flags: str) -> str:
-    """``XLA_FLAGS`` with the CPU scheduler flag added (see the module notes), unless already set."""
-    return flags if _SCHEDULER in flags else f"{flags} {_SCHEDULER}=false".strip()
-
+from ._xla import with_scheduler_off
 
 if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     jax.config.update("jax_enable_x64", True)
-os.environ["XLA_FLAGS"] = xla_flags(os.environ.get("XLA_FLAGS", ""))
+os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))
