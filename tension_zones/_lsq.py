@@ -38,7 +38,7 @@ def huber_cost(r, w, c):
 
 
 def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=-jnp.inf, hi=jnp.inf,
-                        max_iter=40, tol=1e-10):
+                        max_iter=40, tol=1e-10, rows=None):
     """Minimise ``sum_i w_i rho(|fun(theta)_i|)`` over the ``free`` parameters within ``[lo, hi]``.
 
     Args:
@@ -51,6 +51,8 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
         lo, hi: bounds (scalars or (P,)), enforced by projecting every step.
         max_iter: iteration limit (may be traced); ``0`` just evaluates residuals and Jacobian.
         tol: stop when an accepted step lowers the cost by less than this, relative.
+        rows: the residuals' shape ``(M, d)`` where the caller knows it (spares tracing ``fun`` once
+            just for its shape).
     Returns ``(theta, cost, iterations, residuals (M, d), Jacobian (M, d, P))`` at the result.
 
     Marquardt's scaling (damping ``lam diag(J'WJ)``), a step accepted only if the cost falls (a
@@ -69,10 +71,16 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
         return r[:, None] if r.ndim == 1 else r
 
     def res_jac(th):
-        r = res(th)
-        return r, jax.jacfwd(res)(th)
+        # the residuals ride along as the Jacobian's auxiliary output: the model is traced (and
+        # compiled) once, not once for the value and again for its derivative
+        def twice(t):
+            r = res(t)
+            return r, r
 
-    r_shape = jax.eval_shape(res, theta0).shape
+        J, r = jax.jacfwd(twice, has_aux=True)(th)
+        return r, J
+
+    r_shape = jax.eval_shape(res, theta0).shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
     w = jnp.ones(r_shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
 
     def propose(th, r, J, lam):
