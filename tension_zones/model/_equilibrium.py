@@ -105,6 +105,7 @@ def _pieces(lengths, B):
     return ps, Rs, w
 
 
+@jax.jit  # (jitted: traced once per shape, not at each of its call sites in a solve's trace)
 def load_potential(lengths, x, f, g):
     """``-f . p_tip - g . sum_j int p ds`` (N mm) for the configuration ``x`` (2S,)."""
     B = x.reshape(-1, 2)
@@ -113,6 +114,7 @@ def load_potential(lengths, x, f, g):
     return -jnp.dot(f, ps[-1]) - jnp.dot(g, moment)
 
 
+@jax.jit  # (jitted: its ~10 call sites in a calibration program's trace reuse one trace)
 def load_jacobians(lengths, x):
     """``(d p_tip / d x, d M / d x)``, each (3, 2S), in closed form along the chain; ``M`` is the
     backbone's first moment ``sum_j int p ds`` (what a uniform weight acts on). The load's gradient is
