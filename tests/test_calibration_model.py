@@ -103,7 +103,7 @@ def test_every_effect_is_defined_for_any_robot_and_null_means_none():
     curvature) and the samples carry known tip forces (without a load the rod is constant curvature)."""
     data = _data(30, 7, seed=3, frame="tracker")
     data = dataclasses.replace(data, f=np.random.default_rng(5).normal(0.0, 0.3, (30, 3)))
-    pb = Problem(RobotModel.of(TWO, 2), TWO, data, ALL)  # two pieces suffice to be defined
+    pb = Problem(RobotModel.of(TWO), TWO, data, ALL)  # with the variable curvature on: the rod's program
     sl = pb.spec.slices()
     names = [b.name for b in ALL]
     base = pb.predict(pb.null, names)
@@ -131,3 +131,25 @@ def test_wire_angle_offsets_are_deviations_when_the_pattern_rotation_is_fitted()
     with_rot = ["pattern_rotation", "wire_angle_offset"]
     np.testing.assert_allclose(pb.predict(theta, with_rot), pb.predict(pb.null, with_rot), atol=1e-12)
     assert np.abs(pb.predict(theta, ["wire_angle_offset"]) - pb.predict(pb.null, [])).max() > 1e-3
+
+
+def test_a_fit_on_its_own_rows_equals_the_fit_on_all(monkeypatch):
+    """On a large recording a fit evaluates only its weighted samples (a second program); the play's
+    path still runs over the whole recording, so the fit must equal the one over every sample."""
+    from tension_zones.calibration import _problem
+    from tension_zones.calibration.effects import BY_NAME
+
+    rng = np.random.default_rng(7)
+    n = 200
+    q = np.cumsum(rng.normal(0.0, 0.2, (n, 3)), axis=0)
+    data = Dataset(sample=np.arange(n), q=q, f=np.zeros((n, 3)), p=rng.normal(size=(n, 3)) + [0, 0, 20])
+    blocks = (BY_NAME["backbone_EI"], BY_NAME["backlash"])
+    w = (rng.uniform(size=n) < 0.5).astype(float)
+    active = ["backbone_EI", "backlash"]
+    pb = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, blocks)
+    start = pb.null + np.r_[0.0, 0.1, 0.2, 0.3][: pb.null.size]
+    full = pb.fit(start, active, w, max_iter=8)
+    monkeypatch.setattr(_problem, "FIT_ROWS_MIN", 64)
+    rows, wk = pb._fit_rows(np.r_[w, np.zeros(pb.n_padded - n)])
+    assert len(rows) == 128 and wk.sum() == w.sum()  # 200 -> 256 padded; ~100 weighted -> 128
+    np.testing.assert_allclose(pb.fit(start, active, w, max_iter=8), full, rtol=1e-9, atol=1e-12)

@@ -181,8 +181,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     robot = Robot(robot) if isinstance(robot, Design) else robot
     library = default_library(data.frame) if library is None else tuple(library)
     nominal = default_nominal(data.frame) if nominal is None else tuple(nominal)
-    # the rod model (segments in pieces) only where an effect needs it: it costs a larger solve
-    model = model or RobotModel.of(robot, max((getattr(b, "pieces", 1) for b in (*nominal, *library)), default=1))
+    # constant curvature; the rod variant (segments in pieces) only while an effect needs it (Problem)
+    model = model or RobotModel.of(robot)
     train, held = data.split(holdout)
     n_fit = data.n_samples
     full = data if validate is None else data.concat(validate)
@@ -245,8 +245,16 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         remaining = [n for n in cand_names if n not in active]
         if not remaining:
             break
+        # an effect with no sensitivity without a load is not scored while the model has none (its
+        # score would be 0; for the variable curvature this also spares the rod's program)
+        blocks = {b.name: b for b in pb.spec.blocks}
+        unloaded = not pb.loaded(theta, active)
+        idle = [n for n in remaining if getattr(blocks[n], "needs_load", False) and unloaded]
+        remaining = [n for n in remaining if n not in idle]
+        if not remaining:
+            break
         # effects that switch the solver are scored with their solver on (at null: the same model)
-        switched = [b.name for b in pb.spec.blocks if b.name in remaining and b.scored_on]
+        switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
         r, J = pb.jacobian(theta, active + switched)
         active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
         wts = _glitch_weights(r[held], sigma) if robust else None
@@ -261,8 +269,10 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             scores.append({"round": rnd, "name": name, "score": s["score"], "dof": s["dof"],
                            "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0))})
         scores.sort(key=lambda d: -d["score"])
+        scores += [{"round": rnd, "name": n, "score": 0.0, "dof": int(sl[n].stop - sl[n].start),
+                    "explained_rmse_mm": 0.0, "not_scored": "the model has no load"} for n in idle]
         candidates.extend(scores)
-        z_crit = _norm_isf(alpha / max(len(remaining), 1))
+        z_crit = _norm_isf(alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
         say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
         tried = []
         m = int(held.sum())

@@ -48,9 +48,9 @@ def motion_direction(q, reset=None):
 @dataclasses.dataclass(frozen=True)
 class RobotModel:
     """Any robot of the package (one segment or many) for the loop; hashable (only its wire counts and
-    the pieces per segment: 1, constant curvature; more, the rod model, whose ``curvature_freedom``
-    is declared 0 here, so that it is constant curvature until the ``variable_curvature`` effect
-    frees it)."""
+    the pieces per segment: 1, constant curvature; more, the rod model). The declared
+    ``curvature_freedom`` is 0 here: a model in pieces is constant curvature until the
+    ``variable_curvature`` effect frees it."""
 
     structure: Structure
 
@@ -58,14 +58,16 @@ class RobotModel:
     def of(cls, robot: Robot, pieces: int = 1) -> RobotModel:
         return cls(Structure(robot.n_wires_per_segment, pieces))
 
+    def with_pieces(self, pieces: int) -> RobotModel:
+        """The same robot solved with ``pieces`` per segment (the calibration's rod variant)."""
+        return RobotModel(dataclasses.replace(self.structure, pieces=int(pieces)))
+
     def physical(self, robot: Robot) -> dict:
         if robot.n_wires_per_segment != self.structure.n_wires_per_segment:
             raise ValueError(f"the robot has wire counts {robot.n_wires_per_segment}, the model "
                              f"{self.structure.n_wires_per_segment}")
         phys = robot.params()
         phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
-        if self.structure.pieces > 1:
-            phys["rod"] = jnp.zeros((), phys["length"].dtype)  # the rod solve is off until an effect turns it on
         return phys
 
     def inputs(self, data: Dataset) -> dict:
@@ -75,20 +77,16 @@ class RobotModel:
         reset = jnp.asarray(data.reset, q.dtype)
         return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset}
 
-    def predict(self, phys, inputs):
-        """Tip positions and orientations for all samples (one vmap over the equilibrium). A model in
-        pieces solves them only where ``phys["rod"]`` is on (one conditional for all samples)."""
-        st = self.structure
-        if st.pieces == 1:
-            return self._predict(phys, inputs, st)
-        cc = Structure(st.n_wires_per_segment, 1)
-        return jax.lax.cond(phys["rod"] > 0, lambda ph: self._predict(ph, inputs, st),
-                            lambda ph: self._predict(ph, inputs, cc), phys)
-
     @staticmethod
-    def _predict(phys, inputs, st):
-        # one flag for all samples (outside the vmap): unloaded robots take the cheap path
-        loaded = jnp.any(inputs["f"] != 0) | jnp.any(phys["gravity"] != 0)
+    def loaded(phys, inputs):
+        """Whether the robot carries a load (a known or fitted tip force, or a weight): a bool scalar
+        for all samples. Unloaded, the solve takes its cheap path and the rod is constant curvature."""
+        return jnp.any(inputs["f"] != 0) | jnp.any(phys["gravity"] != 0)
+
+    def predict(self, phys, inputs):
+        """Tip positions and orientations for all samples (one vmap over the equilibrium)."""
+        st = self.structure
+        loaded = self.loaded(phys, inputs)  # one flag for all samples (outside the vmap)
         B = jax.vmap(lambda q, f, d: solve(phys, st, q, f, d, loaded=loaded))(
             inputs["q"], inputs["f"], inputs["direction"])
         lengths = piece_lengths(phys, st)

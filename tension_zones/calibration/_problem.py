@@ -4,7 +4,10 @@ Effects (:mod:`.effects`) transform the physical parameters, then the inputs, th
 tip. Every block (nominal parameters and every candidate) is always present in the compiled function;
 a 0/1 mask over the parameter vector says which are free and a 0/1 per block which are part of the
 model being evaluated; the rest stay at their null values. So one compilation serves the whole loop:
-new values, another active set or another data set of similar size never recompile.
+new values, another active set or another data set of similar size never recompile. An effect that
+needs the segments in pieces (``Effect.pieces``, the rod model) runs, while it is on, a second
+program: the model's ``with_pieces`` variant, compiled the first time it is used and never again, so
+a calibration that never needs the rod never pays for it.
 """
 
 from __future__ import annotations
@@ -39,9 +42,9 @@ def _split(spec: Spec, theta):
     return [theta[o:o + s] for o, s in zip(spec.offsets, spec.sizes)]
 
 
-def predict_theta(spec: Spec, theta, on, phys0, inputs):
-    """The tip (``{"p", "R"}``, sample axis first) for the parameter vector ``theta`` and the blocks
-    ``on`` (B,) 0/1, all blocks applied in stages (parameters, inputs, outputs)."""
+def stages(spec: Spec, theta, on, phys0, inputs):
+    """The physical parameters and the per-sample inputs after every block's ``on_params`` and
+    ``on_inputs`` (``on`` (B,) 0/1 over the blocks), with the blocks' parameter slices and on-flags."""
     parts = _split(spec, theta)
     on = {b.name: on[i] for i, b in enumerate(spec.blocks)}
     m = spec.model
@@ -50,25 +53,49 @@ def predict_theta(spec: Spec, theta, on, phys0, inputs):
         phys = blk.on_params(th, phys, m, on)
     for blk, th in zip(spec.blocks, parts):
         inputs = blk.on_inputs(th, inputs, m, on)
-    out = m.predict(phys, inputs)
+    return phys, inputs, parts, on
+
+
+def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None):
+    """The tip (``{"p", "R"}``, sample axis first) for the parameter vector ``theta`` and the blocks
+    ``on`` (B,) 0/1, all blocks applied in stages (parameters, inputs, outputs); ``rows`` (K,): only
+    those samples (after the input stage, which may depend on the whole sequence, e.g. backlash)."""
+    phys, inputs, parts, on = stages(spec, theta, on, phys0, inputs)
+    if rows is not None:
+        inputs = jax.tree_util.tree_map(lambda a: a[rows], inputs)
+    out = spec.model.predict(phys, inputs)
     for blk, th in zip(spec.blocks, parts):
-        out = blk.on_outputs(th, out, m, on)
+        out = blk.on_outputs(th, out, spec.model, on)
     return out
 
 
 @partial(jax.jit, static_argnums=0)
-def engine(spec, theta0, free, on, w, c, lo, hi, phys0, inputs, y, max_iter):
+def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter):
     """The one compiled function of the loop: a fit of the free parameters (``max_iter = 0`` only
     evaluates, so predictions and score tests need no compilation of their own), then the residuals
-    (N, 3) and their Jacobian (N, 3, P) at the result. See :func:`tension_zones._lsq.levenberg_marquardt`."""
-    fun = lambda th: predict_theta(spec, th, on, phys0, inputs)["p"] - y  # noqa: E731
-    return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter)
+    (K, 3) and their Jacobian (K, 3, P) at the result. ``rows`` (K,): the samples the model is
+    evaluated on (all of them, or a fit's own: see :meth:`Problem.fit`); path-dependent inputs are
+    formed on the whole recording first. ``w`` (K,) their weights. See
+    :func:`tension_zones._lsq.levenberg_marquardt`."""
+    fun = lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]  # noqa: E731
+    return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]))
 
 
 def compilations() -> int:
-    """How many programs the engine has compiled in this process (a test counts them)."""
+    """How many programs the engine has compiled in this process (a test counts them): one per model
+    and padded data size, and one more for the rod variant where an effect needs it."""
     return engine._cache_size()
 
+
+#: A fit stops when an accepted step lowers the cost by less than this, relative: the RMSE then moves
+#: by ~1e-4 mm over the remaining iterations on the FTDCR v4 robot (measured), far below what any
+#: decision of the loop resolves, where a tighter stop ran every full fit to its iteration limit.
+FIT_TOL = 1e-7
+
+#: Fits of a recording of at least this many (padded) samples that weigh at most this share of them
+#: evaluate only the weighted ones (a second program; below, the compilation costs more than it saves).
+FIT_ROWS_MIN = 1024
+FIT_ROWS_SHARE = 0.75
 
 #: Sample counts are padded up to a multiple of this (padding repeats the last sample at zero weight,
 #: after the real ones, so path-dependent state is untouched): sets of similar size share one program.
@@ -109,6 +136,27 @@ class Problem:
         self.lo = np.concatenate([b.bounds(model, phys_np)[0] for b in blocks])
         self.hi = np.concatenate([b.bounds(model, phys_np)[1] for b in blocks])
         self._phys_np = phys_np
+        self._specs = {1: self.spec}
+
+    def spec_for(self, active) -> Spec:
+        """The program for the model made of ``active``: the model itself, or its variant in pieces
+        where an active block needs them (``Effect.pieces``; the parameter vector is the same)."""
+        pieces = max((getattr(b, "pieces", 1) for b in self.spec.blocks if b.name in active), default=1)
+        own = getattr(getattr(self.model, "structure", None), "pieces", 1)
+        if pieces <= own or not hasattr(self.model, "with_pieces"):
+            return self.spec
+        if pieces not in self._specs:
+            self._specs[pieces] = dataclasses.replace(self.spec, model=self.model.with_pieces(pieces))
+        return self._specs[pieces]
+
+    def loaded(self, theta, active) -> bool:
+        """Whether the model made of ``active`` at ``theta`` carries a load (the model's ``loaded``;
+        True for a model that does not say)."""
+        if not hasattr(self.model, "loaded"):
+            return True
+        phys, inputs, _, _ = stages(self.spec, jnp.asarray(theta), jnp.asarray(self.on(active)), self.phys0,
+                                    self.inputs)
+        return bool(self.model.loaded(phys, inputs))
 
     @property
     def names(self):
@@ -129,11 +177,25 @@ class Problem:
         theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
         w = np.zeros(self.n_padded)
         w[: self.n] = weights  # padded samples never count
-        out = engine(self.spec, jnp.asarray(theta0), jnp.asarray(free), jnp.asarray(self.on(active)),
-                     jnp.asarray(w), jnp.asarray(huber_c, float), jnp.asarray(self.lo), jnp.asarray(self.hi),
-                     self.phys0, self.inputs, self.y, jnp.asarray(max_iter))
+        rows, w = self._fit_rows(w) if max_iter > 0 else (np.arange(self.n_padded), w)
+        out = engine(self.spec_for(active), jnp.asarray(theta0), jnp.asarray(free), jnp.asarray(self.on(active)),
+                     jnp.asarray(rows), jnp.asarray(w), jnp.asarray(huber_c, float), jnp.asarray(self.lo),
+                     jnp.asarray(self.hi), self.phys0, self.inputs, self.y, jnp.asarray(max_iter))
         th, cost, it, r, J = (np.asarray(x) for x in out)
+        if len(rows) != self.n_padded:  # a fit on its own rows: residuals of all samples are not at hand
+            return th, cost, it, None, None
         return th, cost, it, r[: self.n], J[: self.n]
+
+    def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
+        """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most
+        ``FIT_ROWS_SHARE`` (a hold-out, a validation file), only its weighted ones (padded to ``PAD``
+        with the last at weight 0): each iteration then costs their share, for one more program.
+        Returns the rows and their weights."""
+        live = np.flatnonzero(w > 0)
+        k = len(live) + (-len(live)) % PAD
+        if self.n_padded < FIT_ROWS_MIN or k > FIT_ROWS_SHARE * self.n_padded or not len(live):
+            return np.arange(self.n_padded), w
+        return np.r_[live, np.full(k - len(live), live[-1])], np.r_[w[live], np.zeros(k - len(live))]
 
     def jacobian(self, theta, active):
         """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta`` of the model made of ``active``."""

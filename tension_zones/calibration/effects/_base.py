@@ -33,6 +33,12 @@ class Effect:
     #: True for an effect that switches the model's solver when it is on (its parameters have no
     #: sensitivity while it is off): the score test then evaluates the Jacobian with it on, at null
     scored_on = False
+    #: segments in this many constant-curvature pieces while the effect is on (the rod model): the
+    #: calibration then runs a second program, the model's ``with_pieces`` variant
+    pieces = 1
+    #: True for an effect with no sensitivity unless the model carries a load (tip force or weight):
+    #: the loop does not score it while the model has none (its score would be exactly 0)
+    needs_load = False
 
     # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
     def size(self, model, phys0) -> int:

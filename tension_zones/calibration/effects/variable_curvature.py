@@ -8,9 +8,9 @@ freedom* ``r`` in ``[0, 1]``, says how freely the pieces may differ: 0 (null) pi
 segment's mean bending (constant curvature), 1 is the elastic rod. Its score at 0 is the rod's
 first-order variation, so a set whose curvature is not constant is named as such rather than
 absorbed by geometry or a registration. Without any load in the model the rod is the
-constant-curvature segment and the effect scores nothing. While the effect is off the model takes
-the constant-curvature solve (a conditional on its on-flag, no recompilation), which costs a
-fraction of the rod's.
+constant-curvature segment and the effect scores nothing, so the loop does not score it then. While
+the effect is off the calibration runs the constant-curvature program, which costs a fraction of the
+rod's; the rod's program is compiled the first time the effect is scored or fitted.
 """
 
 import dataclasses
@@ -30,6 +30,7 @@ class VariableCurvature(Effect):
     #: under a lateral weight of 0.003 N/mm, 0.2 mm with a 0.4 N lateral tip force; model/README.md)
     pieces = 4
     scored_on = True
+    needs_load = True
 
     def size(self, model, phys0):
         return model.structure.n_segments
@@ -43,5 +44,4 @@ class VariableCurvature(Effect):
         return ["curvature_freedom"] if S == 1 else [f"curvature_freedom_{j + 1}" for j in range(S)]
 
     def on_params(self, theta, phys, model, on):
-        # "rod": whether the model solves the pieces at all (off: the cheaper constant-curvature solve)
-        return replace(phys, curvature_freedom=phys["curvature_freedom"] + theta, rod=on[self.name])
+        return replace(phys, curvature_freedom=phys["curvature_freedom"] + theta)
