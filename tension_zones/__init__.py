@@ -18,9 +18,10 @@ if "jax" in sys.modules:
 else:
     if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
         os.environ.setdefault("JAX_ENABLE_X64", "1")
-    from ._xla import with_scheduler_off
+    from ._xla import set_cache_env, with_scheduler_off
 
     os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))  # see _xla
+    set_cache_env()  # compiled programs kept on disk (see _xla)
 
 __version__ = "0.1.0"
 

@@ -15,14 +15,20 @@ three-segment robot over 1000 samples hung with every thread idle; 5 s with the 
 package adds ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA_FLAGS`` unless
 that flag is already there; XLA reads it when JAX makes its first array, so import
 ``tension_zones`` before computing anything with JAX.
+
+**Compilation cache.** Compiled programs are kept on disk (see :mod:`._xla`); set
+``TENSION_ZONES_CACHE=0`` to turn that off.
 """
 
 import os
 
 import jax
 
-from ._xla import with_scheduler_off
+from ._xla import cache_dir, with_scheduler_off
 
 if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
     jax.config.update("jax_enable_x64", True)
 os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))
+_mine = jax.config.jax_compilation_cache_dir is None and "JAX_COMPILATION_CACHE_DIR" not in os.environ
+if _mine and (_path := cache_dir()):
+    jax.config.update("jax_compilation_cache_dir", _path)

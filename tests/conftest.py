@@ -1,6 +1,16 @@
 import os
+import tempfile
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# one compilation cache for the session, fresh each run (never a stale one from an earlier run) and
+# shared by the xdist workers, the notebooks' kernels and the CLI's subprocesses, which inherit it:
+# the same calibration programs are compiled once per session, not once per process
+if "TENSION_ZONES_CACHE" not in os.environ:
+    import atexit
+    import shutil
+
+    os.environ["TENSION_ZONES_CACHE"] = tempfile.mkdtemp(prefix="tz-test-jax-cache-")
+    atexit.register(shutil.rmtree, os.environ["TENSION_ZONES_CACHE"], True)  # by the process that made it
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402

@@ -1,0 +1,45 @@
+"""The package's persistent compilation cache (tension_zones/_xla.py): where it goes, how it is turned
+off, and that a second process compiles from it."""
+
+import os
+import subprocess
+import sys
+
+from tension_zones._xla import cache_dir
+
+PROBE = ("import tension_zones, jax, jax.numpy as jnp, time\n"
+         "print(jax.config.jax_compilation_cache_dir or os.environ.get('JAX_COMPILATION_CACHE_DIR'))\n")
+
+
+def _probe(env):
+    code = "import os\n" + PROBE
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    return out.stdout.strip().splitlines()[-1]
+
+
+def _env(**changes):
+    env = {k: v for k, v in os.environ.items() if k not in ("TENSION_ZONES_CACHE", "JAX_COMPILATION_CACHE_DIR")}
+    env.update(changes)
+    return env
+
+
+def test_cache_folder_from_the_environment(tmp_path, monkeypatch):
+    monkeypatch.setenv("TENSION_ZONES_CACHE", str(tmp_path / "c"))
+    assert cache_dir() == str(tmp_path / "c") and (tmp_path / "c").is_dir()
+    for off in ("0", "off", "false"):
+        monkeypatch.setenv("TENSION_ZONES_CACHE", off)
+        assert cache_dir() is None
+    monkeypatch.delenv("TENSION_ZONES_CACHE")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache_dir() == str(tmp_path / "xdg" / "tension-zones" / "jax")
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    monkeypatch.setenv("TENSION_ZONES_CACHE", str(blocker / "sub"))  # cannot be created: no cache
+    assert cache_dir() is None
+
+
+def test_a_fresh_process_uses_the_cache_and_a_users_jax_setting_wins(tmp_path):
+    assert _probe(_env(TENSION_ZONES_CACHE=str(tmp_path / "c"))) == str(tmp_path / "c")
+    assert _probe(_env(TENSION_ZONES_CACHE="0")) == "None"
+    mine = str(tmp_path / "mine")
+    assert _probe(_env(TENSION_ZONES_CACHE=str(tmp_path / "c"), JAX_COMPILATION_CACHE_DIR=mine)) == mine
