@@ -5,7 +5,9 @@
 ``DIR`` is a checkout of the baseline (``git worktree add DIR dce5739``: the last commit with the
 separate multi-segment stack). Every case runs ``tension-zones calibrate`` in a fresh process (what a
 lab engineer waits for: imports, compilation, fits, report), one case after the other, with
-``JAX_LOG_COMPILES=1`` so that the number of XLA compilations is counted from the log. Cases:
+``JAX_LOG_COMPILES=1`` so that the number of XLA compilations is counted from the log. This code runs
+each case twice: with an empty compilation cache (a first run), then again with the cache the first run
+filled (every later run of the same robot; ``tension_zones/_xla.py``). The baseline has no cache. Cases:
 
 * FTDCR v4, ``train.csv`` with ``val.csv`` as the validation file (``--format opencr``);
 * a 500-sample single-segment set (the shipped ``synthetic/unknown_a_3w``).
@@ -41,8 +43,9 @@ print("SECONDS", time.perf_counter() - t0, "RC", rc, flush=True)
 """
 
 
-def run(code_root: Path, args: list[str]) -> dict:
-    env = dict(os.environ, JAX_LOG_COMPILES="1", PYTHONWARNINGS="ignore")
+def run(code_root: Path, args: list[str], cache: str | None = None) -> dict:
+    env = dict(os.environ, JAX_LOG_COMPILES="1", PYTHONWARNINGS="ignore", TENSION_ZONES_CACHE=cache or "0")
+    env.pop("JAX_COMPILATION_CACHE_DIR", None)
     t0 = time.perf_counter()
     r = subprocess.run([sys.executable, "-c", _CHILD, str(code_root), *args], capture_output=True, text=True,
                        env=env, timeout=7200)
@@ -73,24 +76,29 @@ def load() -> str:
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--baseline", required=True, help="a checkout of the baseline commit")
+    p.add_argument("--baseline", help="a checkout of the baseline commit (needed unless --only new)")
     p.add_argument("--json", help="write the numbers to this JSON file")
     p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
     p.add_argument("--only", choices=("new", "baseline"), help="run one side only")
     p.add_argument("--keep", help="keep this code's report folders under this folder")
     args = p.parse_args(argv)
-    res = {"started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_at_start": load(), "rows": []}
-    for side, root in (("this code", ROOT), ("baseline", Path(args.baseline).resolve())):
+    if args.baseline is None and args.only != "new":
+        p.error("--baseline DIR is needed unless --only new")
+    res = {"started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_at_start": load(), "rows": [],
+           "argv": " ".join(argv if argv is not None else sys.argv[1:])}
+    for side, root in (("this code", ROOT), ("baseline", Path(args.baseline or ".").resolve())):
         if args.only and (args.only == "new") != (side == "this code"):
             continue
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(args.keep) if args.keep and side == "this code" else Path(tmp)
             for name, cli in cases(out).items():
-                print(f"[{side}] {name} ...", flush=True)
-                r = run(root, cli)
-                r.update(side=side, case=name, load=load())
-                print(json.dumps(r), flush=True)
-                res["rows"].append(r)
+                runs = (("none", None),) if side == "baseline" else (("empty", f"{tmp}/cache"), ("filled", f"{tmp}/cache"))
+                for cache_state, cache in runs:
+                    print(f"[{side}, cache {cache_state}] {name} ...", flush=True)
+                    r = run(root, cli + (["--force"] if cache_state == "filled" else []), cache)
+                    r.update(side=side, case=name, cache=cache_state, load=load())
+                    print(json.dumps(r), flush=True)
+                    res["rows"].append(r)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=1))
     md = markdown(res)
@@ -102,13 +110,13 @@ def main(argv=None):
 
 
 def markdown(res) -> str:
-    lines = [f"`python benchmarks/calibration.py --baseline DIR`, started {res['started']} "
+    lines = [f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
              f"({res['load_at_start']}).", "",
-             "| case | code | seconds (in process) | wall seconds (fresh process) | XLA compilations |",
-             "|---|---|---:|---:|---:|"]
+             "| case | code | compilation cache | seconds (in process) | wall seconds (fresh process) | XLA compilations |",
+             "|---|---|---|---:|---:|---:|"]
     for r in res["rows"]:
-        lines.append(f"| {r['case']} | {r['side']} | {r['seconds']:.1f} | {r['wall_seconds']:.1f} | "
-                     f"{r['compilations']} |")
+        lines.append(f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {r['seconds']:.1f} | "
+                     f"{r['wall_seconds']:.1f} | {r['compilations']} |")
     return "\n".join(lines)
 
 
