@@ -99,6 +99,7 @@ def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsy
     assert np.all(np.abs(got - np.array(EFFECTS["preload"].d_preload)) < 5 * std + 0.05)
     md = (out / "report.md").read_text()
     assert "| + preload |" in md and "validation" in md
+    assert "variable_curvature not scored (the model has no load)" in md  # no load in its first round
     for png in rep["plots"]:
         assert (out / png).stat().st_size > 10_000
     assert "validation RMSE" in capsys.readouterr().out

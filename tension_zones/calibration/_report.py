@@ -201,7 +201,8 @@ def markdown(report: dict) -> str:
     for rd in report["rounds"]:
         sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
         lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
-                     + ", ".join(f"{c['name']} {c['score']:.1f}" for c in sc) + ".")
+                     + ", ".join(f"{c['name']} {c['score']:.1f}" if "not_scored" not in c
+                                 else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
         lines.append("")
         for t in rd["tried"]:
             verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
