@@ -243,8 +243,6 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     while rnd < max_rounds:
         rnd += 1
         remaining = [n for n in cand_names if n not in active]
-        if not remaining:
-            break
         # an effect with no sensitivity without a load is not scored while the model has none (its
         # score would be 0; for the variable curvature this also spares the rod's program)
         blocks = {b.name: b for b in pb.spec.blocks}
