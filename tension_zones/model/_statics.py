@@ -25,6 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._numerics import (
+    compact,
     eps_of,
     keep,
     nan_where,
@@ -137,7 +138,7 @@ def _choose_free_set(A, rhs, f_min):
         return M[j, 0, 0] * r0 + M[j, 0, 1] * r1, M[j, 1, 0] * r0 + M[j, 1, 1] * r1
 
     sets = _free_sets(A.shape[1]) > 0.5
-    if len(sets) > _UNROLL_MAX_SETS:  # more wires: vectorised over the sets (compiles fast)
+    if len(sets) > _UNROLL_MAX_SETS or compact():  # vectorised over the sets (compiles fast)
         return jnp.argmin(violation(list(sets.T), *lam_of(slice(None)))).astype(A.dtype)
     # few wires: unrolled over the static sets, elementwise, so that vmapped over poses it is one
     # fused loop (the (m, n)-array form with an argmin runs 2-3x slower on XLA:CPU)
