@@ -81,9 +81,10 @@ class Structure:
 # --------------------------------------------------------------------------------------------
 #: Chains of up to this many links (segments, or pieces of the rod model) are unrolled: the fastest to
 #: run. Longer ones are vectorised and composed by a ``scan``, which compiles to the size of one link
-#: (the FTDCR v4 rod, 12 pieces: its calibration program compiles in 15 s instead of 39 s; its
-#: constant-curvature chain of 3 runs 30 % slower as a scan, so it stays unrolled).
-CHAIN_UNROLL_MAX = 4
+#: (the FTDCR v4 rod, 12 pieces: its calibration program's first evaluation 38.6 s -> 16.6 s; one
+#: segment in 4 pieces: trace, lowering and compile 14.1 s -> 11.2 s, a 500-sample calibration no
+#: slower). The FTDCR v4 constant-curvature chain of 3 ran 30 % slower as a scan: it stays unrolled.
+CHAIN_UNROLL_MAX = 3
 
 
 def chain_poses(lengths, B):
