@@ -347,6 +347,28 @@ def test_load_jacobians_and_chain_tip_derivative_are_exact(x):
     np.testing.assert_allclose(Rf, Rp, atol=1e-10)
 
 
+def test_long_chains_as_a_scan_equal_the_unrolled_chain(monkeypatch):
+    """Chains longer than CHAIN_UNROLL_MAX (the rod's pieces) are composed by a scan: the same poses,
+    tip Jacobian and custom derivative as the unrolled chain, straight pieces included."""
+    from tension_zones.model import _robot as R
+
+    rng = np.random.default_rng(4)
+    L = jnp.asarray(rng.uniform(5.0, 20.0, 6))
+    x = jnp.asarray(np.r_[0.0, 0.0, rng.uniform(-0.6, 0.6, 10)])  # the first piece straight
+
+    def everything():
+        B = x.reshape(6, 2)
+        ps, Rs = R.chain_poses(L, B)
+        tip = jax.jacfwd(lambda LL, xx: R.chain_tip(LL, xx.reshape(6, 2))[0], argnums=(0, 1))(L, x)
+        return ps, Rs, R.chain_J_xB(L, B), *tip
+
+    monkeypatch.setattr(R, "CHAIN_UNROLL_MAX", 0)
+    scanned = everything()
+    monkeypatch.setattr(R, "CHAIN_UNROLL_MAX", 100)
+    for a, b in zip(scanned, everything()):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+
+
 def test_declared_routing_is_read_and_written(tmp_path):
     seg = dict(length_mm=40.0, n_wires=3, pitch_radius_mm=3.0)
     d = {"segments": [seg, dict(seg, wire_angles_deg=[30.0, 150.0, 270.0],
