@@ -248,8 +248,8 @@ def compact_programs():
 
     For programs whose compile time outweighs their run time, such as the design optimiser's (its
     default scenario with four wires: the first run 32.0 s, a second 1.2 s; compact, 17.2 s and
-    1.4 s). Same values up to rounding. Like
-    :func:`frozen_masks`, a ``jit`` keeps the form it was traced with: trace inside the context.
+    1.4 s). Same values up to rounding. Like :func:`frozen_masks`, a ``jit`` keeps the form it was
+    traced with: trace inside the context.
     """
     _COMPACT.append(True)
     try:
@@ -265,7 +265,7 @@ def compact() -> bool:
 
 def unrolled(n: int) -> bool:
     """Whether ``n`` wires are handled as a list of scalars (else as an array)."""
-    return n <= UNROLL_MAX_WIRES and not _COMPACT[-1]
+    return n <= UNROLL_MAX_WIRES and not compact()
 
 
 def _is_list(xs) -> bool:

@@ -257,6 +257,21 @@ def test_gradients_agree_with_finite_differences_away_from_switches():
     np.testing.assert_allclose(g_st, fd, rtol=0.05, atol=0.05 * np.abs(fd).max())
 
 
+@pytest.mark.parametrize("n", [3, 4])
+def test_compact_forms_give_the_unrolled_values(n):
+    """The optimiser traces its objective in the compact forms (per-wire arrays, the statics' free sets
+    vectorised): the same per-pose terms and controllability as the unrolled forms the sweeps use."""
+    from tension_zones._numerics import compact_programs
+
+    sc = parse_scenario({"n_wires": [n], "theta_L_deg": [10.0, 80.0, 35.0], "delta_deg": [0.0, 350.0, 50.0]})
+    d = tz.Design(n, 20.0, 2.0, wire_stiffness=70.0, wire_angles=np.radians(np.arange(n) * 360.0 / n + 7.0))
+    plain = jax.jit(lambda d: opt._grid_terms(d, opt._task(sc)))(d)
+    with compact_programs():
+        compact = jax.jit(lambda d: opt._grid_terms(d, opt._task(sc)))(d)
+    for a, b in zip(jax.tree_util.tree_leaves(plain), jax.tree_util.tree_leaves(compact)):
+        np.testing.assert_allclose(np.asarray(a, float), np.asarray(b, float), rtol=1e-10, atol=1e-12)
+
+
 def test_design_readme_documents_every_scenario_key_and_default():
     """The scenario reference lives beside the code (tension_zones/design/README.md)."""
     import json
