@@ -63,3 +63,22 @@ def test_zero_iterations_only_evaluates_and_new_masks_do_not_recompile():
     f(x0, jnp.asarray([1.0, 0.0]), 30)
     f(x0, jnp.asarray([0.0, 1.0]), 10)
     assert f._cache_size() == 1
+
+
+def test_differentiating_only_the_free_columns_gives_the_same_fit():
+    """``cols``: the free parameters (padded with a repeat) are the only columns differentiated; the
+    fit equals the one that differentiates every column, and the others never move."""
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(40, 6))
+    fun = lambda th: jnp.tanh(jnp.asarray(A) @ th) - 0.3  # noqa: E731
+    free = jnp.asarray([1.0, 0.0, 1.0, 1.0, 0.0, 0.0])
+    x0 = jnp.asarray(rng.normal(size=6) * 0.1)
+    lo = jnp.asarray([-jnp.inf, -jnp.inf, 0.02, -jnp.inf, -jnp.inf, -jnp.inf])  # binds (free optimum 0.008)
+    full = levenberg_marquardt(fun, x0, free=free, lo=lo, max_iter=30)
+    some = jax.jit(lambda x, c: levenberg_marquardt(fun, x, free=free, lo=lo, max_iter=30, cols=c))(
+        x0, jnp.asarray([0, 2, 3, 3, 3]))
+    np.testing.assert_allclose(some[0], full[0], rtol=1e-12, atol=1e-14)
+    assert int(some[2]) == int(full[2]) and some[4].shape == (40, 1, 5)
+    np.testing.assert_array_equal(np.asarray(some[0])[[1, 4, 5]], np.asarray(x0)[[1, 4, 5]])
+    np.testing.assert_allclose(some[4][:, :, :3], np.asarray(full[4])[:, :, [0, 2, 3]], rtol=1e-12)
+    assert float(some[0][2]) == 0.02
