@@ -153,3 +153,30 @@ def test_a_fit_on_its_own_rows_equals_the_fit_on_all(monkeypatch):
     rows, wk = pb._fit_rows(np.r_[w, np.zeros(pb.n_padded - n)])
     assert len(rows) == 128 and wk.sum() == w.sum()  # 200 -> 256 padded; ~100 weighted -> 128
     np.testing.assert_allclose(pb.fit(start, active, w, max_iter=8), full, rtol=1e-9, atol=1e-12)
+
+
+def test_evaluations_in_the_fits_program_equal_one_evaluation_and_compile_nothing(monkeypatch):
+    """Once fits run on their own rows and free columns, evaluations call that program on pieces of
+    the samples and of the parameters: the residuals and the Jacobian equal one evaluation of every
+    sample and parameter, and no program is compiled for them."""
+    from tension_zones.calibration import _problem
+    from tension_zones.calibration.effects import BY_NAME
+
+    rng = np.random.default_rng(8)
+    n = 300  # 320 padded: two pieces of 192 rows (the second padded)
+    q = np.cumsum(rng.normal(0.0, 0.2, (n, 3)), axis=0)
+    data = Dataset(sample=np.arange(n), q=q, f=np.zeros((n, 3)), p=rng.normal(size=(n, 3)) + [0, 0, 20])
+    blocks = tuple(BY_NAME[k] for k in ("backbone_EI", "backlash", "preload", "wire_stiffness", "registration"))
+    theta = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, blocks).null + 0.01
+    names = [b.name for b in blocks]
+    reference = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, blocks).jacobian(theta, names)
+    monkeypatch.setattr(_problem, "FIT_ROWS_MIN", 64)
+    pb = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, blocks)
+    pb.fit(theta, ["backbone_EI", "backlash"], (rng.uniform(size=n) < 0.55).astype(float), max_iter=2)
+    assert pb._shape[0] < pb.n_padded and pb._shape[1] < pb.null.size  # its own rows and columns
+    size = compilations()
+    r, J = pb.jacobian(theta, names)
+    np.testing.assert_allclose(r, reference[0], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(J, reference[1], rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(pb.residuals(theta, names), reference[0], rtol=1e-12, atol=1e-12)
+    assert compilations() == size
