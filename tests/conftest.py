@@ -45,3 +45,9 @@ def omega_jacobian(fn_R, x):
     dR = jax.jacfwd(fn_R)(x)
     W = np.einsum("ijk,lj->kil", np.asarray(dR), np.asarray(R))
     return np.stack([W[:, 2, 1], W[:, 0, 2], W[:, 1, 0]], axis=0)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The end-to-end cases (``slow``) first: under ``-n 2`` the workers then end on short tests
+    together, instead of one waiting for the other's notebook (the same order on every worker)."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)

@@ -85,7 +85,7 @@ def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_ite
 
 def compilations() -> int:
     """How many programs the engine has compiled in this process (a test counts them): one per model
-    and padded data size, and one more for the rod variant where an effect needs it."""
+    and shape (the fits' rows and columns), and one more for the rod variant where an effect needs it."""
     return engine._cache_size()
 
 
@@ -96,11 +96,12 @@ def compilations() -> int:
 FIT_TOL = 1e-5
 
 #: Fits of a recording of at least this many (padded) samples that weigh at most this share of them
-#: evaluate only the weighted ones (a second program; below, the compilation costs more than it saves).
+#: evaluate only the weighted ones (evaluations then run that program in pieces of the samples:
+#: :meth:`Problem._evaluate`).
 FIT_ROWS_MIN = 1024
 FIT_ROWS_SHARE = 0.75
 
-#: A fit on its own rows differentiates its free parameters, padded to a multiple of this (see
+#: A fit differentiates its free parameters, padded to a multiple of this (see
 #: :meth:`Problem._fit_cols`): forward mode costs about one model evaluation per column.
 COLS_STEP = 8
 
@@ -192,18 +193,17 @@ class Problem:
         w = np.zeros(self.n_padded)
         w[: self.n] = weights  # padded samples never count
         rows, w = self._fit_rows(w)
-        cols = np.arange(self.null.shape[0])
-        if len(rows) != self.n_padded:  # a fit on its own rows: its free columns too (one program)
-            cols = self._fit_cols(free)
-            self._shape = self._shape or (len(rows), len(cols))
+        cols = self._fit_cols(free)
+        self._shape = self._shape or (len(rows), len(cols))  # evaluations from now on run this program
         return self._call(theta0, active, free, rows, w, huber_c, max_iter, cols)[0]
 
     def _evaluate(self, theta, active, jacobian=True):
-        """Residuals (N, 3) and, with ``jacobian``, their Jacobian (N, 3, P) at ``theta``: one call of
-        the program over every sample and parameter, or, once fits run a program of their own
-        shape (their rows and columns: :meth:`_fit_rows`), calls of that program over pieces of the
-        samples and of the parameters, so that a calibration compiles one program per model (the
-        compilation costs more than the pieces' overlap)."""
+        """Residuals (N, 3) and, with ``jacobian``, their Jacobian (N, 3, P) at ``theta``: before any
+        fit, one call of the program over every sample and parameter; once a fit has run, calls of
+        the fits' program (their rows: :meth:`_fit_rows`, their columns: :meth:`_fit_cols`) over
+        pieces of the samples and of the parameters, so that a calibration compiles one program per
+        model (a compilation costs more than the pieces' overlap; residuals alone need one piece of
+        the columns, which costs less than all of them)."""
         theta = np.clip(np.asarray(theta, float), self.lo, self.hi)
         P, d = self.null.shape[0], self.y.shape[1]
         k, c = self._shape or (self.n_padded, P)
@@ -233,11 +233,9 @@ class Problem:
         return np.r_[live, np.full(k - len(live), live[-1])], np.r_[w[live], np.zeros(k - len(live))]
 
     def _fit_cols(self, free) -> np.ndarray:
-        """The parameters a fit on its own rows differentiates: its free ones, padded (by repeating
-        the last) to half the parameter vector (rounded up to a multiple of ``COLS_STEP``), or all of
-        them where more are free. Such a fit runs a program of its own anyway (its rows), so the
-        fewer columns cost no compilation while a model holds at most half the parameters; a larger
-        one compiles the all-columns variant once."""
+        """The parameters a fit differentiates: its free ones, padded (by repeating the last) to half
+        the parameter vector (rounded up to a multiple of ``COLS_STEP``), or all of them where more
+        are free (a model that holds more than half the parameters then compiles that variant once)."""
         P = self.null.shape[0]
         live = np.flatnonzero(np.asarray(free) > 0)
         k = min(P, COLS_STEP * -(-((P + 1) // 2) // COLS_STEP))
