@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._loop import EXCESS_RATIO, STRUCTURE_Z, Result
+from ._loop import EXCESS_RATIO, SCREEN_ITERATIONS, STRUCTURE_Z, Result
 
 PLOTS = {
     "bending_direction": "residual_vs_bending_direction.png",
@@ -204,6 +204,13 @@ def markdown(report: dict) -> str:
                      + ", ".join(f"{c['name']} {c['score']:.1f}" if "not_scored" not in c
                                  else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
         lines.append("")
+        screened = [c for c in sc if "screened_rmse_mm" in c]
+        if screened:
+            lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
+                         f"{rd['rmse_held_out_mm']:.4f} mm): "
+                         + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
+                                     + (" (not lower: no full refit)" if c.get("screened_out") else "")
+                                     for c in screened))
         for t in rd["tried"]:
             verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
                                                     else "not significant")
@@ -215,7 +222,8 @@ def markdown(report: dict) -> str:
                          f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
                          "effect and is removed")
         if not rd["tried"]:
-            lines.append("- no candidate significant: the loop stops.")
+            lines.append("- no short refit lowered the held-out error: the loop stops." if screened
+                         else "- no candidate significant: the loop stops.")
         lines.append("")
     lines += ["Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
               f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):", "",
