@@ -76,7 +76,7 @@ def test_new_values_other_effects_and_another_robot_never_recompile():
 
 
 def test_padding_changes_nothing():
-    # the engine pads sample counts to a multiple of 64 at zero weight; results must not notice
+    # the engine pads sample counts to a multiple of PAD (128) at zero weight; results must not notice
     data = _data(40, 3, seed=2)
     model = RobotModel.of(tz.Robot(D3))
     pb = Problem(model, tz.Robot(D3), data, nominal("base") + library("base"))

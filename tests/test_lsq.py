@@ -70,7 +70,7 @@ def test_differentiating_only_the_free_columns_gives_the_same_fit():
     fit equals the one that differentiates every column, and the others never move."""
     rng = np.random.default_rng(3)
     A = rng.normal(size=(40, 6))
-    fun = lambda th: jnp.tanh(jnp.asarray(A) @ th) - 0.3  # noqa: E731
+    fun = lambda th: jnp.tanh(jnp.asarray(A) @ th) - 0.3
     free = jnp.asarray([1.0, 0.0, 1.0, 1.0, 0.0, 0.0])
     x0 = jnp.asarray(rng.normal(size=6) * 0.1)
     lo = jnp.asarray([-jnp.inf, -jnp.inf, 0.02, -jnp.inf, -jnp.inf, -jnp.inf])  # binds (free optimum 0.008)

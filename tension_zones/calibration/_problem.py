@@ -106,8 +106,12 @@ FIT_ROWS_SHARE = 0.75
 COLS_STEP = 8
 
 #: Sample counts are padded up to a multiple of this (padding repeats the last sample at zero weight,
-#: after the real ones, so path-dependent state is untouched): sets of similar size share one program.
-PAD = 64
+#: after the real ones, so path-dependent state is untouched): sets of similar size share one program
+#: (e.g. the shipped 400- and 500-sample sets of one robot), for at most 127 rows evaluated in vain.
+PAD = 128
+#: A fit's own rows (:meth:`Problem._fit_rows`) are padded to a multiple of this: one calibration
+#: has one such count, and every fit iteration pays for the padding.
+FIT_PAD = 64
 
 
 def _pad(data):
@@ -221,11 +225,11 @@ class Problem:
 
     def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
         """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most
-        ``FIT_ROWS_SHARE`` (a hold-out, a validation file), only its weighted ones (padded to ``PAD``
+        ``FIT_ROWS_SHARE`` (a hold-out, a validation file), only its weighted ones (padded to ``FIT_PAD``
         with the last at weight 0): each iteration then costs their share, for one more program.
         Returns the rows and their weights."""
         live = np.flatnonzero(w > 0)
-        k = len(live) + (-len(live)) % PAD
+        k = len(live) + (-len(live)) % FIT_PAD
         if self._shape and len(live) <= self._shape[0]:
             k = self._shape[0]  # fewer rows than the program has: pad, rather than compile another
         if self.n_padded < FIT_ROWS_MIN or k > FIT_ROWS_SHARE * self.n_padded or not len(live):
