@@ -57,7 +57,8 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
         cols: (K,) indices of the only columns to differentiate (default all ``P``): every free
             parameter must be among them; an index listed again is ignored (pads ``K`` to a size
             that serves many free sets with one compiled program). Forward mode costs about one
-            model evaluation per column, so a fit of 30 free parameters of 70 runs 2-3x faster.
+            model evaluation per column (the FTDCR v4 model's Jacobian: 32 of 71 columns in about a
+            third of the time of all 71).
     Returns ``(theta, cost, iterations, residuals (M, d), Jacobian (M, d, K))`` at the result.
 
     Marquardt's scaling (damping ``lam diag(J'WJ)``), a step accepted only if the cost falls (a

@@ -30,7 +30,24 @@ ALONE = {
 def run(tmp_path, name, truth, seed=1, **kw):
     csv, dj = write_set(tmp_path, name, truth, 240, seed=seed)
     design = tz.Design.from_json(dj)
-    return calibrate(read_csv(csv, design.n_wires, float(design.length)), design, **kw).to_json()
+    rep = calibrate(read_csv(csv, design.n_wires, float(design.length)), design, **kw).to_json()
+    screening(rep)
+    return rep
+
+
+def screening(rep) -> int:
+    """Where a round screened its candidates (short refits), only those whose short refit lowered the
+    held-out error went on to full refits. Returns how many candidates were screened."""
+    count = 0
+    for rd in rep["rounds"]:
+        sc = {c["name"]: c for c in rep["candidates"] if c["round"] == rd["round"] and "screened_rmse_mm" in c}
+        count += len(sc)
+        for t in rd["tried"]:
+            assert not sc.get(t["name"], {}).get("screened_out", False)
+        if not rep["robust"]:  # (robust decisions leave glitches out of the held-out error)
+            for c in sc.values():
+                assert c["screened_out"] == (c["screened_rmse_mm"] >= rd["rmse_held_out_mm"])
+    return count
 
 
 def names(report):
@@ -84,6 +101,7 @@ def test_no_effect_nothing_added(tmp_path, seed):
 def test_effect_outside_library_reports_structure(tmp_path):
     # a periodic tracker drift along the acquisition order: nothing in the library can produce it
     rep = run(tmp_path, "drift", Truth(drift_mm=0.25))
+    assert screening(rep) > 4  # (more than four significant candidates in a round: screened)
     assert rep["unexplained_structure"] is True
     assert names(rep) == []  # no wrong claim
     assert rep["structure"]["order"]["z"] > 4

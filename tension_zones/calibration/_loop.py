@@ -236,6 +236,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         sigma = np.asarray(noise["sigma_mm"])
     sigma = np.maximum(sigma, 1e-9)
     rmse_before, err, r = held_error(theta, active)
+    plain = rmse_before  # the current model's held-out RMSE (err: the one decisions use)
     say(f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
         f"noise floor {noise['floor_mm']:.4f} mm")
     effects, candidates, rounds = [], [], []
@@ -276,6 +277,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
         tried = []
         m = int(held.sum())
+        plain_start = plain  # (not rmse(r[held]): r is the model with the scored-on effects at null)
         significant = [s for s in scores if s["score"] > z_crit]
         if len(significant) > TRIES_PER_ROUND:
             # screen: a short refit of every significant candidate, then the full refits of the best
@@ -285,9 +287,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 s["screened_rmse_mm"] = held_error(pb.fit(th0, active + [s["name"]], w_train,
                                                           max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
             say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
-            # a candidate whose short refit does not lower the held-out error at all cannot pass the
-            # refit's tests (they need a drop of the held-out error) within a few more iterations
-            # either: it goes no further (on FTDCR v4 this spares the rod's full refits, ~50 s each)
+            # a candidate whose short refit does not lower the held-out error at all is unlikely to
+            # pass the refit's tests (they need a clear drop of it): it goes no further. On FTDCR v4
+            # this spares six full refits, none of which passed (two of them the rod's, ~50 s each)
             for s in significant:
                 s["screened_out"] = bool(s["screened_rmse_mm"] >= err)
             significant = sorted((s for s in significant if not s["screened_out"]),
@@ -316,7 +318,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         good = [t for t in tried if t["significant"]]
         accepted = min(good, key=lambda t: t["err"]) if good else None
         if accepted is not None:
-            theta, err = accepted["theta"], accepted["err"]
+            theta, err, plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
             active.append(accepted["name"])
             effects.append({"name": accepted["name"], "rmse_after_mm": accepted["rmse_held_out_mm"],
                             "score": accepted["score"]})
@@ -339,14 +341,14 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
                 say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
                 if rise < need:
-                    theta, err, active = th_wo, err_wo, rest
+                    theta, err, plain, active = th_wo, err_wo, plain_wo, rest
                     effects = [x for x in effects if x["name"] != e["name"]]
                     removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
                                     "needed": need})
                     say(f"  removed {e['name']}")
                     break
             models.append((list(active), theta.copy()))
-        rounds.append({"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": rmse(r[held]),
+        rounds.append({"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": plain_start,
                        "rmse_train_mm": rmse(r[train]), "tried": tried, "accepted": accepted, "removed": removed})
         if accepted is None:
             break

@@ -226,8 +226,8 @@ class Problem:
     def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
         """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most
         ``FIT_ROWS_SHARE`` (a hold-out, a validation file), only its weighted ones (padded to ``FIT_PAD``
-        with the last at weight 0): each iteration then costs their share, for one more program.
-        Returns the rows and their weights."""
+        with the last at weight 0): each iteration then costs their share. Once a fit has run, a fit
+        of no more rows pads to that fit's count (the same program). Returns the rows and their weights."""
         live = np.flatnonzero(w > 0)
         k = len(live) + (-len(live)) % FIT_PAD
         if self._shape and len(live) <= self._shape[0]:
@@ -243,8 +243,9 @@ class Problem:
         P = self.null.shape[0]
         live = np.flatnonzero(np.asarray(free) > 0)
         k = min(P, COLS_STEP * -(-((P + 1) // 2) // COLS_STEP))
-        if len(live) > k or not len(live):
+        if len(live) > k:
             return np.arange(P)
+        live = live if len(live) else np.zeros(1, int)  # nothing free: any column (it does not move)
         return np.r_[live, np.full(k - len(live), live[-1])]
 
     def jacobian(self, theta, active):
