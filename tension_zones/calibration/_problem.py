@@ -20,6 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._lsq import levenberg_marquardt
+from .._xla import fast_compile_options
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,7 +70,7 @@ def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None):
     return out
 
 
-@partial(jax.jit, static_argnums=0)
+@partial(jax.jit, static_argnums=0, compiler_options=fast_compile_options())
 def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter, cols):
     """The one compiled function of the loop: a fit of the free parameters (``max_iter = 0`` only
     evaluates, so predictions and score tests need no compilation of their own), then the residuals

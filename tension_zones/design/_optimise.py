@@ -44,6 +44,7 @@ import numpy as np
 import optax
 
 from .._numerics import compact_programs
+from .._xla import fast_compile_options
 from ..model._design import Design
 from ._scenario import Scenario
 from ..model._zones import tension_mask
@@ -272,7 +273,7 @@ def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool =
 
 
 #: :func:`_objective`, compiled once per wire count and task shape (not once per call).
-_objective_jit = jax.jit(_objective, static_argnums=(2, 4))
+_objective_jit = jax.jit(_objective, static_argnums=(2, 4), compiler_options=fast_compile_options())
 
 
 def _task(sc: Scenario) -> _Task:
@@ -350,7 +351,8 @@ def _base(sc: Scenario, n: int) -> Design:
 # ---------------------------------------------------------------------------------------------
 # The run
 # ---------------------------------------------------------------------------------------------
-@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"))
+@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"),
+                   compiler_options=fast_compile_options())
 def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc,
                 steps, with_defl):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
