@@ -33,6 +33,7 @@ import math
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ..model import Design, Robot
@@ -40,7 +41,7 @@ from ._baselines import baselines
 from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._model import RobotModel
-from ._problem import Problem, correlations, parameter_std
+from ._problem import Problem, correlations, parameter_std, physical
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -147,11 +148,7 @@ class Result:
 
 def final_parameters(pb: Problem, theta, active) -> dict:
     """The physical parameters after every fitted effect, plus each fitted block in report units."""
-    parts = pb.spec.slices()
-    on = {b.name: float(b.name in active) for b in pb.spec.blocks}
-    phys = pb.phys0
-    for b in pb.spec.blocks:
-        phys = b.on_params(np.asarray(theta)[parts[b.name]], phys, pb.model, on)
+    phys = physical(pb.spec, jnp.asarray(theta), jnp.asarray(pb.on(active)), pb.phys0)
     phys = jax.tree_util.tree_map(lambda x: np.asarray(x).tolist(), phys)
     phys["route_angles_deg"] = np.degrees(phys.pop("route_angles")).tolist()
     return {"physical": phys, "fitted": pb.describe(theta, active)}

@@ -46,15 +46,17 @@ def _split(spec: Spec, theta):
 def stages(spec: Spec, theta, on, phys0, inputs):
     """The physical parameters and the per-sample inputs after every block's ``on_params`` and
     ``on_inputs`` (``on`` (B,) 0/1 over the blocks), with the blocks' parameter slices and on-flags."""
-    parts = _split(spec, theta)
-    on = {b.name: on[i] for i, b in enumerate(spec.blocks)}
-    m = spec.model
-    phys = phys0
+    parts, on = _split(spec, theta), {b.name: on[i] for i, b in enumerate(spec.blocks)}
+    phys = _on_params(spec, parts, on, phys0)
     for blk, th in zip(spec.blocks, parts):
-        phys = blk.on_params(th, phys, m, on)
-    for blk, th in zip(spec.blocks, parts):
-        inputs = blk.on_inputs(th, inputs, m, on)
+        inputs = blk.on_inputs(th, inputs, spec.model, on)
     return phys, inputs, parts, on
+
+
+def _on_params(spec: Spec, parts, on, phys):
+    for blk, th in zip(spec.blocks, parts):
+        phys = blk.on_params(th, phys, spec.model, on)
+    return phys
 
 
 def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None):
@@ -82,6 +84,21 @@ def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_ite
     fun = lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]  # noqa: E731
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
                                cols=cols)
+
+
+@partial(jax.jit, static_argnums=0)
+def physical(spec: Spec, theta, on, phys0):
+    """The physical parameters after every block's ``on_params`` (``on`` (B,) 0/1 over the blocks), as
+    one small program (eagerly, the blocks' stages dispatch and compile one operation at a time)."""
+    return _on_params(spec, _split(spec, theta), {b.name: on[i] for i, b in enumerate(spec.blocks)}, phys0)
+
+
+@partial(jax.jit, static_argnums=0)
+def _loaded(spec, theta, on, phys0, inputs):
+    """The model's ``loaded`` flag after every block's stages: one small program (run eagerly, the
+    stages dispatched and compiled some 30 single operations at every round of the loop)."""
+    phys, inputs, _, _ = stages(spec, theta, on, phys0, inputs)
+    return spec.model.loaded(phys, inputs)
 
 
 def compilations() -> int:
@@ -168,9 +185,7 @@ class Problem:
         True for a model that does not say)."""
         if not hasattr(self.model, "loaded"):
             return True
-        phys, inputs, _, _ = stages(self.spec, jnp.asarray(theta), jnp.asarray(self.on(active)), self.phys0,
-                                    self.inputs)
-        return bool(self.model.loaded(phys, inputs))
+        return bool(_loaded(self.spec, jnp.asarray(theta), jnp.asarray(self.on(active)), self.phys0, self.inputs))
 
     @property
     def names(self):
