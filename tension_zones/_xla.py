@@ -56,7 +56,8 @@ def _jaxlib_version() -> tuple:
 
 def fast_compile_options() -> dict:
     """XLA options for programs whose compile time outweighs their run time (the calibration's
-    engine, the design optimiser): ``jax.jit(..., compiler_options=fast_compile_options())``.
+    engine, the design optimiser, the paper's identification):
+    ``jax.jit(..., compiler_options=fast_compile_options())``.
 
     XLA:CPU's MLIR fusion emitters (jaxlib 0.5.3 on; the first release with the switch) take much of
     the compile time of these large programs; the older emitters compile them faster and run them as
@@ -65,7 +66,8 @@ def fast_compile_options() -> dict:
     first call, trace and compile of the constant-curvature program, 8.9 / 10.3 -> 7.3 / 6.0 s; the
     rod's 9.8 / 10.4 -> 7.6 / 8.8 s; a 41-iteration fit 0.61 / 0.66 -> 0.57 / 0.65 s); the FTDCR v4
     calibration 107.8 -> 111.9 s (once each: fits dominate there, no gain); the notebook 04
-    optimisation's first call 33.6 / 27.9 -> 21.6 / 25.9 s. Results equal to 1e-15. The sweeps keep
+    optimisation's first call 33.6 / 27.9 -> 21.6 / 25.9 s; the identification's first call 10.2 / 10.5
+    -> 8.8 / 7.6 s (a later call 0.15-0.17 s either way). Results equal to 1e-15. The sweeps keep
     XLA's defaults (their run time matters). JAX takes such options on top-level jits only; older
     jaxlibs do not know the switch (nor have those emitters): no options there.
     """

@@ -9,11 +9,14 @@ statics pipeline (tension QP, taut set, stiffness, compliance) in log-parameters
 
 from __future__ import annotations
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .._lsq import levenberg_marquardt
+from .._xla import fast_compile_options
 from ..model._design import Design
 from ..model._kinematics import over_grid
 from ..model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG, PAPER_WRENCH, compliance_pose
@@ -87,7 +90,7 @@ def _residuals(log_params, target):
     return model_means(log_params) / target - 1.0
 
 
-@jax.jit
+@partial(jax.jit, compiler_options=fast_compile_options())
 def _fit(init, target, maxiter):
     """The package's least-squares solver (:func:`tension_zones._lsq.levenberg_marquardt`) on the twelve
     relative errors, in log-parameters; a step whose residuals are not finite (some workspace pose
