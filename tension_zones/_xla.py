@@ -12,6 +12,7 @@ The folder is ``$TENSION_ZONES_CACHE`` if set (``0``/``off``: no cache), else
 JAX (``JAX_COMPILATION_CACHE_DIR``) is left alone, and a folder that cannot be created means no cache.
 """
 
+import functools
 import os
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
@@ -45,6 +46,7 @@ def set_cache_env() -> None:
         os.environ["JAX_COMPILATION_CACHE_DIR"] = path
 
 
+@functools.cache
 def _jaxlib_version() -> tuple:
     from importlib.metadata import version
 

@@ -43,10 +43,15 @@ def _split(spec: Spec, theta):
     return [theta[o:o + s] for o, s in zip(spec.offsets, spec.sizes)]
 
 
+def _named(spec: Spec, on):
+    """The blocks' on-flags ``on`` (B,) by block name."""
+    return {b.name: on[i] for i, b in enumerate(spec.blocks)}
+
+
 def stages(spec: Spec, theta, on, phys0, inputs):
     """The physical parameters and the per-sample inputs after every block's ``on_params`` and
     ``on_inputs`` (``on`` (B,) 0/1 over the blocks), with the blocks' parameter slices and on-flags."""
-    parts, on = _split(spec, theta), {b.name: on[i] for i, b in enumerate(spec.blocks)}
+    parts, on = _split(spec, theta), _named(spec, on)
     phys = _on_params(spec, parts, on, phys0)
     for blk, th in zip(spec.blocks, parts):
         inputs = blk.on_inputs(th, inputs, spec.model, on)
@@ -90,7 +95,7 @@ def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_ite
 def physical(spec: Spec, theta, on, phys0):
     """The physical parameters after every block's ``on_params`` (``on`` (B,) 0/1 over the blocks), as
     one small program (eagerly, the blocks' stages dispatch and compile one operation at a time)."""
-    return _on_params(spec, _split(spec, theta), {b.name: on[i] for i, b in enumerate(spec.blocks)}, phys0)
+    return _on_params(spec, _split(spec, theta), _named(spec, on), phys0)
 
 
 @partial(jax.jit, static_argnums=0)
