@@ -16,6 +16,7 @@ import functools
 import os
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
+_FUSION = "xla_cpu_use_fusion_emitters"
 
 
 def with_scheduler_off(flags: str) -> str:
@@ -73,4 +74,10 @@ def fast_compile_options() -> dict:
     XLA's defaults (their run time matters). JAX takes such options on top-level jits only; older
     jaxlibs do not know the switch (nor have those emitters): no options there.
     """
-    return {"xla_cpu_use_fusion_emitters": False} if _jaxlib_version() >= (0, 5, 3) else {}
+    return {_FUSION: False} if _jaxlib_version() >= (0, 5, 3) else {}
+
+
+def fast_compile_flag() -> str:
+    """The same switch for a whole process, as an ``XLA_FLAGS`` entry ("" where jaxlib lacks it): for
+    work made of many small programs, such as the test suite, whose compile time is most of its time."""
+    return f"--{_FUSION}=false" if fast_compile_options() else ""

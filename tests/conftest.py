@@ -12,6 +12,15 @@ if "TENSION_ZONES_CACHE" not in os.environ:
     os.environ["TENSION_ZONES_CACHE"] = tempfile.mkdtemp(prefix="tz-test-jax-cache-")
     atexit.register(shutil.rmtree, os.environ["TENSION_ZONES_CACHE"], True)  # by the process that made it
 
+# the tests are compile-bound (small inputs, thousands of programs): XLA:CPU's older emitters compile
+# them faster (the package's large programs use them already: tension_zones/_xla.py), the suite
+# 728.7 -> 646.5 s on 2 cores; subprocesses inherit the flag. The package's own default codegen is what
+# test_xla_cache.py compares against, in a child process without it.
+from tension_zones._xla import fast_compile_flag  # (no JAX import)
+
+if (_flag := fast_compile_flag()) and _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
+
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

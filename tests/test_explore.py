@@ -235,7 +235,8 @@ def free_port():
 def test_two_jax_distributed_processes_give_the_same_table(tmp_path):
     """Acceptance: two processes on localhost (CPU) give the one-process table, bit for bit. Each has
     two local devices, over which each chunk's designs are split (here: one device)."""
-    env = dict(os.environ, JAX_PLATFORMS="cpu", XLA_FLAGS="--xla_force_host_platform_device_count=2",
+    env = dict(os.environ, JAX_PLATFORMS="cpu",  # (the suite's own XLA flags too: the same codegen as here)
+               XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2",
                PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1])] + sys.path))
     port, out = str(free_port()), tmp_path / "two"
     procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, port, str(i), str(out), json.dumps(SPACE)],

@@ -46,10 +46,6 @@ def test_a_fresh_process_uses_the_cache_and_a_users_jax_setting_wins(tmp_path):
 
 
 def test_fast_compile_options_only_where_jaxlib_has_them_and_change_no_result(monkeypatch):
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
     from tension_zones import _xla
 
     for version, expected in (((0, 4, 30), {}), ((0, 5, 1), {}), ((0, 5, 3), {"xla_cpu_use_fusion_emitters": False}),
@@ -59,12 +55,26 @@ def test_fast_compile_options_only_where_jaxlib_has_them_and_change_no_result(mo
     monkeypatch.undo()
     assert len(_xla._jaxlib_version()) >= 2  # the installed jaxlib's version is read
 
-    def f(x):  # fusions of elementwise work, a reduction and a scatter, as in the calibration's programs
-        y = jnp.sin(x) * jnp.exp(-x**2) + jnp.sqrt(1.0 + x**2)
-        return y.at[::3].add(jnp.cumsum(y)[::3]).sum() + jnp.tanh(y) @ y
+    # against the default codegen: in a child without the suite's process-wide flag (conftest.py)
+    code = """
+import jax, jax.numpy as jnp, numpy as np
+import tension_zones
+from tension_zones import _xla
 
-    x = jnp.linspace(-2.0, 3.0, 301)
-    fast = jax.jit(f, compiler_options=_xla.fast_compile_options())  # the installed jaxlib accepts them
-    np.testing.assert_allclose(fast(x), jax.jit(f)(x), rtol=1e-12)
-    fast_grad = jax.jit(jax.grad(f), compiler_options=_xla.fast_compile_options())  # (top-level jits only)
-    np.testing.assert_allclose(fast_grad(x), jax.jit(jax.grad(f))(x), rtol=1e-12, atol=1e-14)
+def f(x):  # fusions of elementwise work, a reduction and a scatter, as in the calibration's programs
+    y = jnp.sin(x) * jnp.exp(-x**2) + jnp.sqrt(1.0 + x**2)
+    return y.at[::3].add(jnp.cumsum(y)[::3]).sum() + jnp.tanh(y) @ y
+
+x = jnp.linspace(-2.0, 3.0, 301)
+fast = jax.jit(f, compiler_options=_xla.fast_compile_options())  # the installed jaxlib accepts them
+np.testing.assert_allclose(fast(x), jax.jit(f)(x), rtol=1e-12)
+fast_grad = jax.jit(jax.grad(f), compiler_options=_xla.fast_compile_options())  # (top-level jits only)
+np.testing.assert_allclose(fast_grad(x), jax.jit(jax.grad(f))(x), rtol=1e-12, atol=1e-14)
+print("equal")
+"""
+    flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if "fusion_emitters" not in f)
+    out = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, XLA_FLAGS=flags), capture_output=True,
+                         text=True, check=False)
+    assert out.returncode == 0 and out.stdout.strip() == "equal", out.stderr[-2000:]
+    if _xla.fast_compile_options():  # the suite runs with the same switch for the whole process
+        assert _xla.fast_compile_flag() in os.environ["XLA_FLAGS"]
