@@ -78,3 +78,63 @@ print("equal")
     assert out.returncode == 0 and out.stdout.strip() == "equal", out.stderr[-2000:]
     if _xla.fast_compile_options():  # the suite runs with the same switch for the whole process
         assert _xla.fast_compile_flag() in os.environ["XLA_FLAGS"]
+
+
+def test_programs_kept_on_disk_are_loaded_without_tracing_and_keyed_by_sources(tmp_path, monkeypatch):
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from tension_zones import _xla
+
+    monkeypatch.setenv("TENSION_ZONES_CACHE", str(tmp_path / "c"))
+    traced = []
+
+    def f(x, d):
+        traced.append(1)  # runs only while tracing
+        return {"y": jnp.sin(x) @ d["a"], "z": jax.lax.while_loop(lambda c: c[0] < 5, lambda c: (c[0] + 1, c[1] * 2.0),
+                                                                   (0, x))[1]}
+
+    args = (jnp.linspace(0.0, 1.0, 7), {"a": jnp.ones((7, 2))})
+    want = jax.jit(f)(*args)
+    first = _xla.stored_program(jax.jit(f), args, "test f")
+    folder = tmp_path / "c" / "programs"
+    assert len(list(folder.iterdir())) == 1
+    traced.clear()
+    again = _xla.stored_program(jax.jit(f), args, "test f")  # as a later process: loaded, not traced
+    for got in (first(*args), again(*args)):
+        np.testing.assert_array_equal(got["y"], want["y"])
+        np.testing.assert_array_equal(got["z"], want["z"])
+    assert traced == []
+    # other shapes, another key or other package sources: another program
+    _xla.stored_program(jax.jit(f), (jnp.zeros(3), {"a": jnp.ones((3, 2))}), "test f")
+    _xla.stored_program(jax.jit(f), args, "test g")
+    monkeypatch.setattr(_xla, "_sources_digest", lambda: "edited")
+    _xla.stored_program(jax.jit(f), args, "test f")
+    assert len(list(folder.iterdir())) == 4
+    # a damaged file is exported again, the result still right
+    for p in folder.iterdir():
+        p.write_bytes(b"not a program")
+    np.testing.assert_array_equal(_xla.stored_program(jax.jit(f), args, "test f")(*args)["y"], want["y"])
+    # no cache folder: the function itself
+    monkeypatch.setenv("TENSION_ZONES_CACHE", "0")
+    g = jax.jit(f)
+    assert _xla.stored_program(g, args, "test f") is g
+
+
+def test_classes_outside_the_package_are_keyed_by_their_source(tmp_path, monkeypatch):
+    import importlib
+
+    from tension_zones import _xla
+    from tension_zones.calibration.effects import Backlash, Effect
+
+    assert _xla.classes_digest([Backlash, Effect]) == ""  # the package's own: its sources' digest covers them
+    mod = tmp_path / "my_effect.py"
+    mod.write_text("from tension_zones.calibration.effects import Effect\nclass Mine(Effect):\n    name = 'mine'\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    Mine = importlib.import_module("my_effect").Mine
+    d1 = _xla.classes_digest([Backlash, Mine])
+    mod.write_text(mod.read_text() + "# edited\n")
+    assert len(d1) == 64 and _xla.classes_digest([Mine]) != d1
+    Local = type("Local", (Effect,), {"__module__": "__main__"})  # e.g. defined in a notebook
+    assert _xla.classes_digest([Local]) is None

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._lsq import levenberg_marquardt
-from .._xla import fast_compile_options
+from .._xla import classes_digest, fast_compile_options, stored_program
 
 
 @dataclasses.dataclass(frozen=True)
@@ -77,8 +77,7 @@ def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None):
     return out
 
 
-@partial(jax.jit, static_argnums=0, compiler_options=fast_compile_options())
-def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter, cols):
+def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter, cols):
     """The one compiled function of the loop: a fit of the free parameters (``max_iter = 0`` only
     evaluates, so predictions and score tests need no compilation of their own), then the residuals
     (K, 3) and their Jacobian (K, 3, C) at the result. ``rows`` (K,): the samples the model is
@@ -89,6 +88,29 @@ def engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_ite
     fun = lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]  # noqa: E731
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
                                cols=cols)
+
+
+#: The engine's programs in this process, by model (``Spec``) and the arguments' shapes.
+_PROGRAMS: dict = {}
+
+
+def engine(spec, *args):
+    """:func:`_engine`, compiled once per model and shapes (``fast_compile_options``) and kept on disk
+    before tracing (``_xla.stored_program``: a later process skips its 2.5-3.5 s trace). The stored
+    program's key holds the spec (its repr: the model's static structure and the blocks) and the
+    sources of any block or model class defined outside the package; one defined where it has no
+    file (a notebook) is traced in every process."""
+    leaves = jax.tree_util.tree_leaves(args)
+    key = (spec, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+    fn = _PROGRAMS.get(key)
+    if fn is None:
+        opts = fast_compile_options()
+        fn = jax.jit(partial(_engine, spec), compiler_options=opts)
+        classes = [type(spec.model)] + [type(b) for b in spec.blocks]
+        if (outside := classes_digest(classes)) is not None:
+            fn = stored_program(fn, args, f"calibration engine|{spec!r}|{outside}|{FIT_TOL!r}", opts)
+        _PROGRAMS[key] = fn
+    return fn(*args)
 
 
 @partial(jax.jit, static_argnums=0)
@@ -107,9 +129,10 @@ def _loaded(spec, theta, on, phys0, inputs):
 
 
 def compilations() -> int:
-    """How many programs the engine has compiled in this process (a test counts them): one per model
-    and shape (the fits' rows and columns), and one more for the rod variant where an effect needs it."""
-    return engine._cache_size()
+    """How many programs the engine has made in this process (compiled, or loaded from the cache; a
+    test counts them): one per model and shape (the fits' rows and columns), and one more for the rod
+    variant where an effect needs it."""
+    return len(_PROGRAMS)
 
 
 #: A fit stops when an accepted step lowers the cost by less than this, relative. The loop's decisions
