@@ -136,7 +136,6 @@ def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = No
     and whatever it closes over that the package's sources do not fix). Without a cache folder, or if
     exporting or loading fails, ``fn`` itself (traced as usual)."""
     import hashlib
-    import tempfile
     from pathlib import Path
 
     import jax
@@ -154,24 +153,39 @@ def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = No
                       jax.default_backend(), str(jax.config.jax_enable_x64), str(tree), avals, key,
                       repr(sorted((compiler_options or {}).items()))])
     path = Path(folder) / "programs" / f"{hashlib.sha256(ident.encode()).hexdigest()}.jaxexport"
-    opts = dict(compiler_options=compiler_options) if compiler_options else {}
-    try:
-        exp = export.deserialize(bytearray(path.read_bytes()))
+    opts = {"compiler_options": compiler_options} if compiler_options else {}
+    if (exp := _read_program(path)) is not None:
         return jax.jit(exp.call, **opts)
-    except FileNotFoundError:
-        pass
-    except Exception:  # noqa: BLE001  (a damaged or foreign file: export again over it)
-        pass
     try:
         exp = export.export(fn)(*args)
         blob = exp.serialize() if hasattr(exp, "serialize") else export.serialize(exp)  # (JAX < 0.4.31)
     except Exception:  # noqa: BLE001  (a program JAX cannot export or serialise: traced as usual)
         return fn
+    _write_atomic(path, blob)
+    return jax.jit(exp.call, **opts)
+
+
+def _read_program(path):
+    """The exported program stored at ``path``, or None (none there, or a damaged or foreign file,
+    which is then exported again over it)."""
+    from jax import export
+
+    try:
+        return export.deserialize(bytearray(path.read_bytes()))
+    except Exception:  # noqa: BLE001
+        return None
+
+
+def _write_atomic(path, blob: bytes) -> None:
+    """Write ``blob`` to ``path``, atomically (a concurrent reader sees the old file or the new one);
+    a folder that cannot be written keeps nothing."""
+    import tempfile
+    from pathlib import Path
+
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as f:
             f.write(blob)
-        Path(f.name).replace(path)  # atomic: a concurrent reader sees the old file or the new one
+        Path(f.name).replace(path)
     except OSError:
-        pass
-    return jax.jit(exp.call, **opts)
+        return
