@@ -14,7 +14,7 @@ if "TENSION_ZONES_CACHE" not in os.environ:
 
 # the tests are compile-bound (small inputs, thousands of programs): XLA:CPU's older emitters compile
 # them faster (the package's large programs use them already: tension_zones/_xla.py), the suite
-# 728.7 -> 646.5 s on 2 cores; subprocesses inherit the flag. The package's own default codegen is what
+# 722.4 -> 599.9 s on 2 cores (same machine, an hour apart); subprocesses inherit the flag. The package's own default codegen is what
 # test_xla_cache.py compares against, in a child process without it.
 from tension_zones._xla import fast_compile_flag  # (no JAX import)
 
