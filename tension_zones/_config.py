@@ -16,8 +16,9 @@ package adds ``--xla_cpu_enable_concurrency_optimized_scheduler=false`` to ``XLA
 that flag is already there; XLA reads it when JAX makes its first array, so import
 ``tension_zones`` before computing anything with JAX.
 
-**Compilation cache.** Compiled programs are kept on disk (see :mod:`._xla`); set
-``TENSION_ZONES_CACHE=0`` to turn that off.
+**Compilation cache.** Compiled programs, and the calibration's exported programs, are kept on disk
+(see :mod:`._xla`); set ``TENSION_ZONES_CACHE=0`` to turn that off. Deleting the folder is safe: it
+only costs the next run its compile.
 """
 
 import os
