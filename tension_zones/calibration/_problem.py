@@ -100,8 +100,8 @@ def engine(spec, *args):
     program's key holds the spec (its repr: the model's static structure and the blocks) and the
     sources of any block or model class defined outside the package; one defined where it has no
     file (a notebook) is traced in every process."""
-    leaves = jax.tree_util.tree_leaves(args)
-    key = (spec, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    key = (spec, tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
     fn = _PROGRAMS.get(key)
     if fn is None:
         opts = fast_compile_options()

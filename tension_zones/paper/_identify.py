@@ -122,11 +122,11 @@ def identify(initial=None, maxiter: int = 50):
         init = np.log(start)
         p, its, r = _fit(jnp.asarray(init), target, maxiter)
         p, its, r = np.asarray(p), int(its), np.asarray(r)
-        if np.all(np.isfinite(r)) and (best is None or r @ r < best[2]):
-            best = (p, its, float(r @ r), r)
+        if np.all(np.isfinite(r)) and (best is None or r @ r < best[2] @ best[2]):
+            best = (p, its, r)
     if best is None:
         raise ValueError("the identification found no parameter set with a stable workspace")
-    p, its, _, err = best  # the residuals at the result, from the fit's program (an eager evaluation
+    p, its, err = best  # the residuals at the result, from the fit's program (an eager evaluation
     # of the vmapped workspace statistics would dispatch, and compile, some 300 single operations)
     L, r, EI = (float(x) for x in np.exp(np.asarray(p)))
     return {
