@@ -193,6 +193,7 @@ class RobotTruth:
     marker: tuple = (0.0, 0.0, 0.0)  # mm, tip frame
     d_length: tuple = ()  # per segment, mm
     d_radius: tuple = ()  # per segment, mm
+    twist_deg: tuple = ()  # per pair of neighbouring segments: turn of segment j's disks against j + 1's
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
     noise: float = 0.05
     pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
@@ -265,11 +266,13 @@ class _Robot:
         self.EI = np.repeat(EI, m)
         self.radius = np.repeat(radius, m, axis=1)
         self.crossed = (self.owner + 1) * m  # pieces each wire runs through
+        twist = np.radians(np.asarray(truth.twist_deg, float)) if len(truth.twist_deg) else np.zeros(len(segs) - 1)
         # wire length changes are linear in the bending vectors: dl = A x (own assembly of the rows)
         self.A = np.zeros((self.N, 2 * self.S))
         for k in range(self.N):
             for j in range(self.crossed[k]):
-                self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(self.alpha[k]), np.sin(self.alpha[k])])
+                a = self.alpha[k] + twist[j // m:self.owner[k]].sum()  # turned by the disks' twists on the way
+                self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(a), np.sin(a)])
         self.loaded = bool(np.any(self.f) or np.any(self.g))
 
 

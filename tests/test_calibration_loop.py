@@ -91,6 +91,7 @@ def test_pairs_are_found(tmp_path, truth, expected):
 def test_no_effect_nothing_added(tmp_path, seed):
     rep = run(tmp_path, "none", Truth(), seed=seed)
     assert names(rep) == []
+    assert "routing_twist" not in {c["name"] for c in rep["candidates"]}  # nothing to twist in one segment
     floor = 0.05 * np.sqrt(3)  # the simulated noise
     assert rep["rmse_after_mm"] < 1.15 * floor
     assert not rep["unexplained_structure"]

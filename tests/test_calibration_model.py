@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 import tension_zones as tz
 from tension_zones.calibration import Dataset, Problem, RobotModel, compilations, motion_direction
 from tension_zones.calibration._problem import predict_theta
-from tension_zones.calibration.effects import ALL, library, nominal, play
+from tension_zones.calibration.effects import ALL, BY_NAME, library, nominal, play
 
 D3 = tz.Design(3, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=2.0)
 TWO = tz.Robot([tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=1.0),
@@ -131,6 +131,22 @@ def test_wire_angle_offsets_are_deviations_when_the_pattern_rotation_is_fitted()
     with_rot = ["pattern_rotation", "wire_angle_offset"]
     np.testing.assert_allclose(pb.predict(theta, with_rot), pb.predict(pb.null, with_rot), atol=1e-12)
     assert np.abs(pb.predict(theta, ["wire_angle_offset"]) - pb.predict(pb.null, [])).max() > 1e-3
+
+
+def test_the_routing_twist_turns_only_the_wires_crossing_segments_they_do_not_end_in():
+    """Three segments: a wire of segment o runs through segment j < o turned by the twists between
+    them (tau_j + ... + tau_{o-1}), and at its own angle in its own segment; one segment has none."""
+    three = tz.Robot([tz.Design(3, 30.0, 2.0), tz.Design(3, 30.0, 2.0), tz.Design(4, 30.0, 2.0)])
+    model = RobotModel.of(three)
+    phys = model.physical(three)
+    tau = np.array([0.1, -0.03])
+    got = np.asarray(BY_NAME["routing_twist"].on_params(jnp.asarray(tau), phys, model, {})["route_angles"])
+    want = np.array(phys["route_angles"])
+    for k, o in enumerate(three.owner):
+        for j in range(o):
+            want[k, j] += tau[j:o].sum()
+    np.testing.assert_allclose(got, want, atol=1e-15)
+    assert BY_NAME["routing_twist"].size(RobotModel.of(tz.Robot(D3)), None) == 0
 
 
 def test_a_fit_on_its_own_rows_equals_the_fit_on_all(monkeypatch):

@@ -216,7 +216,9 @@ def markdown(report: dict) -> str:
                                                     else "not significant")
             lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
                          f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
-                         f"{t['needed']:.1f}) -> {verdict}")
+                         f"{t['needed']:.1f})"
+                         + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
+                         + f" -> {verdict}")
         for t in rd.get("removed", []):
             lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
                          f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "

@@ -15,6 +15,7 @@ from .offset import Offset
 from .pattern_rotation import PatternRotation
 from .preload import Preload
 from .registration import Registration
+from .routing_twist import RoutingTwist
 from .tip_force import TipForce
 from .variable_curvature import VariableCurvature
 from .wire_angle_offset import WireAngleOffset
@@ -22,7 +23,7 @@ from .wire_stiffness import WireStiffness
 
 #: Every effect, in the order reports list them.
 ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
-       WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Marker(), Geometry())
+       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Marker(), Geometry())
 #: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
 #: in an unregistered tracker frame, whose origin is never known, nor which way each segment's wires
 #: point (a rotation of the tracker is a candidate: the registration).
@@ -42,5 +43,5 @@ def nominal(frame: str = "base") -> tuple[Effect, ...]:
 
 
 __all__ = ["ALL", "BY_NAME", "NOMINAL", "BackboneEI", "Backlash", "Effect", "Friction", "Geometry", "Gravity",
-           "Marker", "Offset", "PatternRotation", "Preload", "Registration", "TipForce", "VariableCurvature", "WireAngleOffset", "WireStiffness",
+           "Marker", "Offset", "PatternRotation", "Preload", "Registration", "RoutingTwist", "TipForce", "VariableCurvature", "WireAngleOffset", "WireStiffness",
            "library", "nominal", "play"]
