@@ -94,6 +94,9 @@ def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsy
     assert rep["rmse_validate_aligned_mm"] <= rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
     assert rep["steps"][-1]["rmse_validate_mm"] < rep["steps"][0]["rmse_validate_mm"]
     assert "pattern group" in rep["holdout"]
+    # the model, with only the design file, at most half the best black-box baseline on the validation file
+    best = min(b["rmse_validate_mm"] for b in rep["baselines"].values())
+    assert rep["rmse_validate_mm"] <= 0.5 * best
     # the preload recovered within 5 linearised standard deviations
     got = np.array(list(rep["parameters"]["fitted"]["preload"].values()))
     std = np.array(list(rep["parameters"]["std"]["preload"].values()))

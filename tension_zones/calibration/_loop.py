@@ -8,8 +8,9 @@ For any robot (one segment or many) and any reader:
    residual projected on the effect's parameter sensitivities, after what the fitted parameters can
    explain; a z-value).
 3. Refit the significant candidates on the training part (where more than ``TRIES_PER_ROUND`` are
-   significant, a short refit of each first, then full refits of the best of those that lowered
-   the held-out error);
+   significant, or the rod's is one of several, a short refit of each first, then full refits of the
+   best of those whose short refit lowered the held-out error by a quarter of the drop the refit
+   needs);
    a refit counts when its held-out error drops significantly: the drop of the held-out sum of
    squares, in units of the current residual's per-axis variance (at least the noise variance), must
    exceed the chi-square quantile of the effect's parameter count at ``alpha``, the held-out RMSE
@@ -276,19 +277,28 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         m, m_train = int(held.sum()), int(train.sum())
         plain_start = plain  # (not rmse(r[held]): r is the model with the scored-on effects at null)
         significant = [s for s in scores if s["score"] > z_crit]
-        if len(significant) > TRIES_PER_ROUND:
+        # held-out SSE drops are in units of the per-axis variance of the current residual (at least
+        # the noise): structure the model lacks must not make a chance improvement look significant
+        unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+        if len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
+                getattr(blocks[s["name"]], "pieces", 1) > 1 for s in significant)):
             # screen: a short refit of every significant candidate, then the full refits of the best
+            # (also where fewer are significant but one of them is the rod's, whose full refit costs
+            # as much as several of the others')
             for s in significant:
                 th0 = theta.copy()
                 th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
                 s["screened_rmse_mm"] = held_error(pb.fit(th0, active + [s["name"]], w_train,
                                                           max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
             say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
-            # a candidate whose short refit does not lower the held-out error at all is unlikely to
-            # pass the refit's tests (they need a clear drop of it): it goes no further. On FTDCR v4
-            # this spares six full refits, none of which passed (two of them the rod's, ~50 s each)
+            # a candidate whose short refit does not lower the held-out error by a quarter of the drop
+            # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
+            # steps take most of the gain): it goes no further. On FTDCR v4 this spares eight full
+            # refits, none of which passed (three of them the rod's, 35-50 s each)
             for s in significant:
-                s["screened_out"] = bool(s["screened_rmse_mm"] >= err)
+                s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
+                s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
+                s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
             significant = sorted((s for s in significant if not s["screened_out"]),
                                  key=lambda s: s["screened_rmse_mm"])
         for s in significant[:TRIES_PER_ROUND]:
@@ -296,9 +306,6 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
             th_new = fit(th0, active + [s["name"]])
             plain_new, err_new, r_new = held_error(th_new, active + [s["name"]])
-            # held-out SSE drop in units of the per-axis variance of the current residual (at least
-            # the noise): structure the model lacks must not make a chance improvement look significant
-            unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
             drop = (err**2 - err_new**2) * m / unit
             need = chi2_quantile(alpha, max(s["dof"], 1))
             # the training part's gain, tested the same way: not a share of the held-out gain, since the

@@ -209,7 +209,7 @@ def markdown(report: dict) -> str:
             lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
                          f"{rd['rmse_held_out_mm']:.4f} mm): "
                          + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
-                                     + (" (not lower: no full refit)" if c.get("screened_out") else "")
+                                     + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
                                      for c in screened))
         for t in rd["tried"]:
             verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
