@@ -196,4 +196,9 @@ def test_evaluations_in_the_fits_program_equal_one_evaluation_and_compile_nothin
     np.testing.assert_allclose(r, reference[0], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(J, reference[1], rtol=1e-10, atol=1e-12)
     np.testing.assert_allclose(pb.residuals(theta, names), reference[0], rtol=1e-12, atol=1e-12)
+    # some samples only (the score test's held-out ones), in pieces of that program too
+    some = np.sort(rng.choice(n, 250, replace=False))
+    r, J = pb.jacobian(theta, names, samples=some)
+    np.testing.assert_allclose(r, reference[0][some], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(J, reference[1][some], rtol=1e-10, atol=1e-12)
     assert compilations() == size

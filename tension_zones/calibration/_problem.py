@@ -245,17 +245,23 @@ class Problem:
         self._shape = self._shape or (len(rows), len(cols))  # evaluations from now on run this program
         return self._call(theta0, active, free, rows, w, huber_c, max_iter, cols)[0]
 
-    def _evaluate(self, theta, active, jacobian=True):
+    def _evaluate(self, theta, active, jacobian=True, samples=None):
         """Residuals (N, 3) and, with ``jacobian``, their Jacobian (N, 3, P) at ``theta``: before any
         fit, one call of the program over every sample and parameter; once a fit has run, calls of
         the fits' program (their rows: :meth:`_fit_rows`, their columns: :meth:`_fit_cols`) over
         pieces of the samples and of the parameters, so that a calibration compiles one program per
         model (a compilation costs more than the pieces' overlap; residuals alone need one piece of
-        the columns, which costs less than all of them)."""
+        the columns, which costs less than all of them). ``samples`` (K,): only those (path-dependent
+        inputs are still formed over the whole recording), (K, 3) and (K, 3, P)."""
         theta = np.clip(np.asarray(theta, float), self.lo, self.hi)
         P, d = self.null.shape[0], self.y.shape[1]
         k, c = self._shape or (self.n_padded, P)
-        rows = np.minimum(np.arange(-(-self.n_padded // k) * k), self.n_padded - 1).reshape(-1, k)
+        if samples is None:
+            want = np.arange(self.n)
+            rows = np.minimum(np.arange(-(-self.n_padded // k) * k), self.n_padded - 1).reshape(-1, k)
+        else:  # the samples asked for, padded with the last of them
+            want = np.asarray(samples, int)
+            rows = np.r_[want, np.full(-len(want) % k, want[-1])].reshape(-1, k)
         col_sets = [np.minimum(np.arange(i, i + c), P - 1) for i in range(0, P if jacobian else 1, c)]
         r = np.empty((rows.size, d))
         J = np.empty((rows.size, d, P)) if jacobian else None
@@ -265,7 +271,7 @@ class Problem:
                 r[i * k:(i + 1) * k] = out[3]
                 if jacobian:
                     J[i * k:(i + 1) * k, :, cs] = out[4]
-        return r[: self.n], (J[: self.n] if jacobian else None)
+        return r[:len(want)], (J[:len(want)] if jacobian else None)
 
     def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
         """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most
@@ -292,9 +298,10 @@ class Problem:
         live = live if len(live) else np.zeros(1, int)  # nothing free: any column (it does not move)
         return np.r_[live, np.full(k - len(live), live[-1])]
 
-    def jacobian(self, theta, active):
-        """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta`` of the model made of ``active``."""
-        return self._evaluate(theta, active)
+    def jacobian(self, theta, active, samples=None):
+        """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta`` of the model made of ``active``; with
+        ``samples`` (K,) only those samples' (K, 3), (K, 3, P)."""
+        return self._evaluate(theta, active, samples=samples)
 
     def residuals(self, theta, active) -> np.ndarray:
         return self._evaluate(theta, active, jacobian=False)[0]
