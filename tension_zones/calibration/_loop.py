@@ -225,6 +225,14 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         r = pb.residuals(theta, active)
         return rmse(r[held]), decision_error(r, held), r
 
+    held_idx = np.flatnonzero(held)
+
+    def held_only(theta, active):
+        """(plain RMSE, the error used for decisions) on the held-out part, evaluating only its samples
+        (a short refit's or a removal's verdict needs no others)."""
+        rh = pb.residuals(theta, active, samples=held_idx)
+        return rmse(rh), decision_error(rh, np.ones(len(rh), bool))
+
     active = list(nominal_names)
     theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
     theta_before = theta.copy()
@@ -290,8 +298,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             for s in significant:
                 th0 = theta.copy()
                 th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
-                s["screened_rmse_mm"] = held_error(pb.fit(th0, active + [s["name"]], w_train,
-                                                          max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
+                s["screened_rmse_mm"] = held_only(pb.fit(th0, active + [s["name"]], w_train,
+                                                         max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
             say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
             # a candidate whose short refit does not lower the held-out error by a quarter of the drop
             # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
@@ -348,7 +356,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 th0[sl[e["name"]]] = pb.null[sl[e["name"]]]
                 rest = [a for a in active if a != e["name"]]
                 th_wo = fit(th0, rest)
-                plain_wo, err_wo, _ = held_error(th_wo, rest)
+                plain_wo, err_wo = held_only(th_wo, rest)
                 unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
                 rise = (err_wo**2 - err**2) * m / unit
                 need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))

@@ -303,8 +303,9 @@ class Problem:
         ``samples`` (K,) only those samples' (K, 3), (K, 3, P)."""
         return self._evaluate(theta, active, samples=samples)
 
-    def residuals(self, theta, active) -> np.ndarray:
-        return self._evaluate(theta, active, jacobian=False)[0]
+    def residuals(self, theta, active, samples=None) -> np.ndarray:
+        """Residuals (N, 3) (prediction - measurement); with ``samples`` (K,) only those, (K, 3)."""
+        return self._evaluate(theta, active, jacobian=False, samples=samples)[0]
 
     def predict(self, theta, active) -> np.ndarray:
         return self.residuals(theta, active) + np.asarray(self.y)[: self.n]
