@@ -7,10 +7,10 @@ Predicts ``train.csv`` and ``val.csv`` with the final model of the shipped repor
 and asks where the residual's dependence on the acquisition order comes from (the structure test's
 ``order`` item):
 
-- **hysteresis**: at the home command (every wire within ``HOME_MM`` of zero) the measured tip should be
-  one place; its spread, and its component along the direction of the largest excursion of the
-  ``BACK`` samples before, say how much the robot remembers of where it came from;
-- **drift** (creep, temperature, a tracker moving): the home tip with that memory removed, against time;
+- **hysteresis and drift** (:func:`~tension_zones.calibration.home_memory`): at the home command (every
+  wire within ``HOME_MM`` of zero) the measured tip should be in one place; how far it sits along the
+  direction of the largest excursion of the ``BACK`` samples before is memory, a trend against time
+  (creep, temperature, a tracker moving) is drift, both fitted together;
 - **tracker latency**: the residual along the predicted direction of motion (a late tracker lags: a
   negative mean);
 - and the RMSE per pattern family.
@@ -24,7 +24,7 @@ import json
 import numpy as np
 
 import tension_zones as tz
-from tension_zones.calibration import predict_report, read_opencr, rmse
+from tension_zones.calibration import home_memory, predict_report, read_opencr, rmse
 from tension_zones.calibration._data import pattern_family
 
 HOME_MM = 0.35
@@ -45,34 +45,17 @@ def main():
         for f in dict.fromkeys(fam):
             m = fam == f
             print(f"| {name} | {f} | {m.sum()} | {rmse(pred[name][m] - d.p[m]):.2f} |")
-    q = np.concatenate([tr.q, va.q])
-    p = np.concatenate([tr.p, va.p])
-    r = p - np.concatenate([pred["train"], pred["val"]])
-    stamps = np.concatenate([tr.timestamp, va.timestamp])  # the recordings' clock (s): val follows train
-    minutes = (stamps - stamps[0]) / 60.0
-    home = np.nonzero(np.abs(q).max(axis=1) < HOME_MM)[0]
-    home = home[home >= BACK]
-    c = np.median(p[home], axis=0)
-    u, lat = [], []
-    for i in home:
-        back = p[i - BACK:i, :2] - c[:2]
-        k = np.argmax(np.linalg.norm(back, axis=1))
-        u.append(back[k] / np.linalg.norm(back[k]))
-        lat.append(p[i, :2] - c[:2])
-    u, lat = np.array(u), np.array(lat)
-    along = np.sum(lat * u, axis=1)
-    across = u[:, 0] * lat[:, 1] - u[:, 1] * lat[:, 0]
-    rest = lat - along[:, None] * u
-    slope = [np.polyfit(minutes[home], rest[:, j], 1)[0] for j in range(2)]
-    res_along = np.sum(r[home, :2] * u, axis=1)
-    print(f"\nhome command (every wire within {HOME_MM} mm of zero): {len(home)} samples over "
-          f"{minutes[home[-1]] - minutes[home[0]]:.0f} min; lateral spread of the measured tip {rmse(lat):.2f} mm "
-          f"(RMS about the median); along the previous excursion {along.mean():+.2f} mm (mean), across it "
-          f"{across.mean():+.2f} mm; the model's residual there along it {res_along.mean():+.2f} mm, RMS "
-          f"{rmse(r[home]):.2f} mm")
-    print(f"drift: the home tip with that memory removed moves {slope[0]:+.3f} / {slope[1]:+.3f} mm per minute "
-          f"(x / y), {abs(slope[0]) * (minutes[-1] - minutes[0]):.2f} / {abs(slope[1]) * (minutes[-1] - minutes[0]):.2f} mm "
-          f"over the {minutes[-1] - minutes[0]:.0f} min of both files; scatter {rmse(rest):.2f} mm")
+    both = tr.concat(va)  # val follows train on the recordings' clock
+    r = both.p - np.concatenate([pred["train"], pred["val"]])
+    h = home_memory(both, HOME_MM, BACK)
+    res_along = np.sum(r[h["index"]] * h["direction"], axis=1)
+    print(f"\nhome command (every wire within {HOME_MM} mm of zero): {h['n']} samples over {h['span']:.0f} min; "
+          f"spread of the measured tip {h['spread_mm']:.2f} mm (RMS about the median); memory along the previous "
+          f"excursion {h['along_mm']:.2f} +- {h['along_std_mm']:.2f} mm, the rest {h['across_mm']:.2f} mm RMS; "
+          f"the model's residual there along it {res_along.mean():+.2f} mm, RMS {rmse(r[h['index']]):.2f} mm")
+    v, sv = h["drift_mm"], h["drift_std_mm"]
+    print("drift (fitted with the memory): " + ", ".join(f"{c} {a:+.3f} +- {b:.3f}" for c, a, b in zip("xyz", v, sv))
+          + f" mm per minute, i.e. {np.abs(v).max() * h['span']:.2f} mm at most over the {h['span']:.0f} min")
     vel = np.concatenate([np.gradient(pred["train"], axis=0), np.gradient(pred["val"], axis=0)])
     speed = np.linalg.norm(vel, axis=1)
     m = speed > 1.0

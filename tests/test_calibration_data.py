@@ -1,6 +1,8 @@
 """Measured data, both readers: errors are one line naming file, column and row; --drop-bad drops and counts;
 the split belongs to the data."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from simulator import Truth, write_set
@@ -244,3 +246,37 @@ def test_grouped_recordings_hold_out_whole_groups(tmp_path):
     assert not set(groups[held]) & set(groups[train])
     both = d.concat(d)
     assert both.reset.sum() == 2 and both.n_samples == 80
+
+
+def test_home_memory_tells_memory_from_drift():
+    """A recording that returns home after excursions in random directions: at home the tip sits 4 mm
+    towards the excursion it came from and drifts 0.05 mm per minute in x. ``home_memory`` recovers
+    both; without timestamps the drift is per sample; too few home samples is a clear error."""
+    from tension_zones.calibration import Dataset, home_memory
+
+    rng = np.random.default_rng(3)
+    q, p, stamps = [], [], []
+    t = 0.0
+    for _ in range(40):
+        u = np.r_[rng.normal(size=2), 0.0]
+        u /= np.linalg.norm(u)
+        for s in np.r_[np.linspace(0.2, 1.0, 10), np.linspace(1.0, 0.2, 10)]:  # out and back
+            q.append(np.full(3, -2.0 * s))
+            p.append([0.0, 0.0, 100.0] + 50.0 * s * u)
+            stamps.append(t)
+            t += 1.5  # s
+        for _ in range(3):  # home: the memory, the drift, noise
+            q.append(np.zeros(3))
+            p.append([0.0, 0.0, 100.0] + 4.0 * u + [0.05 * t / 60.0, 0.0, 0.0] + rng.normal(0.0, 0.05, 3))
+            stamps.append(t)
+            t += 1.5
+    q, p = np.array(q), np.array(p)
+    data = Dataset(sample=np.arange(len(q)), q=q, f=np.zeros_like(p), p=p, timestamp=np.array(stamps))
+    h = home_memory(data)
+    assert h["n"] == 40 * 3 and h["time_unit"] == "minute"
+    assert abs(h["along_mm"] - 4.0) < 0.2
+    assert abs(h["drift_mm"][0] - 0.05) < 0.01 and np.all(np.abs(h["drift_mm"][1:]) < 0.01)
+    h = home_memory(dataclasses.replace(data, timestamp=None))
+    assert h["time_unit"] == "sample" and abs(h["drift_mm"][0] - 0.05 * 1.5 / 60.0) < 2e-4
+    with pytest.raises(ValueError, match="home samples"):
+        home_memory(dataclasses.replace(data, q=q + 5.0))

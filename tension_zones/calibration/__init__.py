@@ -10,7 +10,7 @@
 """
 
 from ._data import READERS, DataError, Dataset, load_data, read_csv, read_opencr
-from ._diagnose import noise_floor, score_test, structure_test
+from ._diagnose import home_memory, noise_floor, score_test, structure_test
 from ._loop import Result, calibrate, predict_report, rmse, rmse_aligned
 from ._model import RobotModel, motion_direction
 from ._problem import Problem, compilations
@@ -18,5 +18,5 @@ from ._report import write_report
 from .effects import Effect
 
 __all__ = ["READERS", "DataError", "Dataset", "Effect", "Problem", "Result", "RobotModel", "calibrate",
-           "compilations", "load_data", "motion_direction", "noise_floor", "predict_report", "read_csv", "read_opencr", "rmse",
+           "compilations", "home_memory", "load_data", "motion_direction", "noise_floor", "predict_report", "read_csv", "read_opencr", "rmse",
            "rmse_aligned", "score_test", "structure_test", "write_report"]

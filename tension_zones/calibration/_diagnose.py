@@ -16,6 +16,10 @@ All NumPy (small arrays, after the jitted model has run).
   candidate effect's parameters (``jax.jacfwd`` at the effect's null values) after removing what the
   already-fitted parameters can explain; ``S = r' P r / sigma^2`` is chi-square with as many degrees
   of freedom as the effect has parameters when the effect is absent. The score is its z-value.
+* **Hysteresis or drift** (:func:`home_memory`, from the measurements alone). Where the structure
+  test finds the residual ordered in time, the robot either remembers its path or drifts. At the home
+  command the tip should be in one place: the part of its spread along the previous excursion is
+  memory, a trend against time is drift (both fitted together).
 """
 
 from __future__ import annotations
@@ -189,3 +193,47 @@ def score_test(r_h: np.ndarray, J_h: np.ndarray, active_cols: np.ndarray, cand_c
     stat = float(proj @ proj)
     expl = float(np.sum(((U[:, :rank] @ proj).reshape(-1, 3) * np.asarray(sigma)) ** 2) / len(r_h))
     return {"score": chi2_z(stat, rank), "stat": stat, "dof": rank, "explained_mm2": expl}
+
+
+def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
+    """Hysteresis against drift, from a recording alone (no model).
+
+    Home samples: every wire within ``home_mm`` (mm) of its zero command, with at least ``back`` samples
+    of the same session before them. Their measured tips ``p_i`` (mm) are fitted (linear least squares)
+    as ``p_i = c + m u_i + v t_i + e_i``: ``u_i`` the direction (unit, 3-D) of the largest excursion from
+    the home tips' median in the ``back`` samples before, ``m`` the memory of the path (mm), ``v`` (3,)
+    the drift per unit of ``t`` (minutes where the data have timestamps, else samples), ``c`` (3,) the
+    home position. Fitted together, so that a drift is not taken for memory nor the other way round.
+
+    Returns ``n``, ``index`` (K,) the home samples, ``direction`` (K, 3) the ``u_i``, ``spread_mm`` (RMS
+    of the home tips about their median), ``along_mm`` (``m``), ``across_mm`` (RMS of ``e``),
+    ``drift_mm`` (``v``) per ``time_unit``, their linearised standard deviations ``along_std_mm`` and
+    ``drift_std_mm`` (3,) (from the scatter of ``e``), and ``span`` (the recording's length in that unit).
+    """
+    q, p = np.asarray(data.q, float), np.asarray(data.p, float)
+    timed = data.timestamp is not None
+    t = (np.asarray(data.timestamp, float) - float(data.timestamp[0])) / 60.0 if timed else np.arange(len(q), dtype=float)
+    session = np.zeros(len(q), int) if data.session is None else np.asarray(data.session)
+    start = np.r_[0, np.flatnonzero(np.diff(session)) + 1]  # each session's first sample
+    first = start[np.searchsorted(start, np.arange(len(q)), side="right") - 1]
+    home = np.flatnonzero((np.abs(q).max(axis=1) < home_mm) & (np.arange(len(q)) - first >= back))
+    if len(home) < 8:
+        raise ValueError(f"{len(home)} home samples (every wire within {home_mm} mm of zero, {back} samples "
+                         "into a session): too few to tell memory from drift")
+    centre = np.median(p[home], axis=0)
+    u = np.empty((len(home), 3))
+    for j, i in enumerate(home):  # (a few dozen home samples: a loop over them, not over poses)
+        exc = p[i - back:i] - centre
+        e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
+        u[j] = e / max(np.linalg.norm(e), 1e-12)
+    # unknowns (c, m, v): 7; rows: 3 per home sample
+    K, eye = len(home), np.eye(3)
+    A = np.concatenate([np.tile(eye, (K, 1)), u.reshape(-1, 1), np.kron(t[home][:, None], eye)], axis=1)
+    sol, *_ = np.linalg.lstsq(A, p[home].reshape(-1), rcond=None)
+    e = p[home].reshape(-1) - A @ sol
+    std = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)) * (e @ e) / max(A.shape[0] - A.shape[1], 1))
+    return {"n": K, "index": home, "direction": u,
+            "spread_mm": float(np.sqrt(np.mean(np.sum((p[home] - centre) ** 2, axis=1)))),
+            "along_mm": float(sol[3]), "along_std_mm": float(std[3]),
+            "across_mm": float(np.sqrt(np.mean(e**2) * 3)), "drift_mm": sol[4:7], "drift_std_mm": std[4:7],
+            "time_unit": "minute" if timed else "sample", "span": float(t[-1] - t[0])}
