@@ -2,8 +2,8 @@
 
 Its own code path on purpose: NumPy physics, SciPy's BFGS for the equilibrium (the library uses a
 damped Newton in JAX with implicit derivatives), a Python loop for path-dependent effects (the
-library scans), its own formulas for every effect (e.g. friction as a linear tension factor where the
-library uses a capstan exponential, registration through SciPy's Rotation). A set is returned as the
+library scans), its own formulas for every effect (e.g. a single segment's friction as a linear tension
+factor where the library uses a capstan exponential, registration through SciPy's Rotation). A set is returned as the
 CSV text of MODEL.md Sec. 6 plus the declared design, and can be written to files.
 """
 
@@ -158,8 +158,9 @@ def write_set(folder, name: str, truth: Truth, n_samples: int = 240, seed: int =
 # Robots of one or more segments, recorded the way the OpenCR lab records (labelled patterns,
 # servo ids shuffled, an unregistered tracker frame). Own code path again: positions from SciPy's
 # rotations, the weight integrated by Gauss-Legendre quadrature, the load's gradient by finite
-# differences, SciPy's BFGS for the equilibrium, friction as a linear tension factor iterated to a
-# fixed point, path-dependent effects as Python loops.
+# differences, SciPy's BFGS for the equilibrium, friction (the capstan's decay over every piece, which
+# is not conservative) by a fixed point of BFGS solves with its force frozen, path-dependent effects as
+# Python loops.
 # =============================================================================================
 ROBOT = {"segments": [
     {"length_mm": 45.0, "n_wires": 3, "pitch_radius_mm": 3.5, "wire_angles_deg": [10.0, 130.0, 250.0],
@@ -184,7 +185,7 @@ class RobotTruth:
     translation: tuple = (2.0, -3.0, 5.0)  # mm
     EI_factors: tuple = (1.2, 0.8)  # per segment
     play: tuple = ()  # per wire, mm
-    friction: tuple = (0.0, 0.0)  # (routing, per rad of bending): linear tension factor 1 +- (...)
+    friction: tuple = (0.0, 0.0)  # (routing, per rad of bending): capstan, decaying over every piece
     angle_offsets_deg: tuple = ()  # per wire
     stiffness_factors: tuple = ()  # per wire
     d_preload: tuple = ()  # per wire, N
@@ -329,25 +330,53 @@ class _Robot:
             g = g + (vals[1:n + 1] - vals[n + 1:]) / (2 * h)
         return V, g
 
+    def factors(self, x, direction):
+        """Each wire's tension factor in every piece it crosses (N, S), the capstan's ``exp(d (mu_0 +
+        mu_1 w))`` with ``w`` the bending wrapped before the piece's middle (an explicit loop). 1 where
+        the wire does not run."""
+        wrap = np.hypot(*x.reshape(self.S, 2).T)
+        T = np.ones((self.N, self.S))
+        for k in range(self.N):
+            for j in range(self.crossed[k]):
+                T[k, j] = np.exp(direction[k] * (self.mu[0] + self.mu[1] * (wrap[:j].sum() + 0.5 * wrap[j])))
+        return T
+
+    def force(self, x, q, direction):
+        """The generalised force with friction (2S,): each wire's tension times its factor in every
+        piece it crosses."""
+        _, g = self.energy(x, q, np.ones(self.N))  # backbone, load, and the wires at factor 1
+        tau = self.k * np.maximum(self.A @ x - q + self.pre / self.k, 0.0)
+        T = self.factors(x, direction)
+        return g + (self.A * np.repeat(T - 1.0, 2, axis=1)).T @ tau
+
     def equilibrium(self, q, direction, x0):
-        t = np.ones(self.N)
-        x = x0
-        for _ in range(30):  # friction: a fixed point of the tension factor and the bending
-            # gtol 1e-6: the tip within 1e-6 mm of a 1e-10 solve (checked), at half the cost
-            # started from the elastic part's inverse Hessian (backbone and taut wires): BFGS then
-            # needs only the load's curvature, a few iterations instead of dozens from the identity
+        """Friction is not conservative: a fixed point of BFGS minimisations of the energy with each
+        wire's mean tension factor and, as a constant force, the rest of the friction force, both
+        updated from the solution until the force itself vanishes."""
+        t, rest, x = np.ones(self.N), np.zeros(2 * self.S), x0
+        friction = bool(np.any(self.mu) and np.any(direction))
+        for _ in range(100):
+            # gtol 1e-6: the tip within 1e-6 mm of a 1e-10 solve (checked), at half the cost (1e-8 with
+            # friction, whose fixed point needs the force to 1e-7); started from the elastic part's
+            # inverse Hessian (backbone and taut wires): BFGS then needs only the load's curvature
             s = self.A @ x - q + self.pre / self.k
             H = np.diag(np.repeat(self.EI / self.L, 2)) + self.A.T @ ((t * self.k * (s > 0))[:, None] * self.A)
             Hi = np.linalg.inv(H)
-            res = minimize(lambda y: self.energy(y, q, t), x, jac=True, method="BFGS",
-                           options={"gtol": 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)})
-            x = res.x
-            wrap = np.array([sum(np.hypot(*x.reshape(self.S, 2)[j]) for j in range(self.crossed[k]))
-                             for k in range(self.N)])
-            t_new = 1.0 + direction * (self.mu[0] + self.mu[1] * wrap)
-            if np.max(np.abs(t_new - t)) < 1e-7:  # the bending's own tolerance (above) allows no better
+
+            def fun(y, t=t, rest=rest):
+                V, g = self.energy(y, q, t)
+                return V + rest @ y, g + rest
+
+            x = minimize(fun, x, jac=True, method="BFGS",
+                         options={"gtol": 1e-8 if friction else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)}).x
+            if not friction:
                 break
-            t = t_new
+            T = self.factors(x, direction)
+            t = np.array([T[k, :self.crossed[k]].mean() for k in range(self.N)])
+            tau = self.k * np.maximum(self.A @ x - q + self.pre / self.k, 0.0)
+            rest = (self.A * np.repeat(T - t[:, None], 2, axis=1)).T @ tau
+            if np.max(np.abs(self.force(x, q, direction))) < 1e-7:
+                break
         return x
 
 

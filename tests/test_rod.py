@@ -82,6 +82,64 @@ def test_two_segments_under_weight_match_the_rod():
     assert np.linalg.norm(p - ref.tip_position) < 0.05 < np.linalg.norm(p1 - ref.tip_position)
 
 
+def _with_friction(robot, q, mu, d, m, load=None):
+    load = Load.none() if load is None else load
+    phys = robot.params()
+    phys.update(friction=jnp.asarray(mu, float), gravity=jnp.asarray(load.gravity, float))
+    st = Structure(robot.n_wires_per_segment, m)
+    B = E.solve(phys, st, q, load.tip_force, jnp.asarray(d, float))
+    sm = E._Sample(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.asarray(d, float),
+                   jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity))))
+    return np.asarray(chain_tip(E.piece_lengths(phys, st), B)[0]), B.reshape(-1), sm
+
+
+@pytest.mark.parametrize("d", [-1.0, 1.0], ids=["pulled", "released"])
+def test_friction_decays_the_tension_over_the_disks_as_the_capstan_rod(d):
+    """One wire taut (the others slack), friction along the routing: the tension acting at arc length
+    ``s`` is ``tau e^{d (mu_0 + mu_1 theta(s))}``, ``theta`` the bending wrapped so far, so
+    ``theta' = c e^{d mu_1 theta}`` (``c = rho tau e^{d mu_0} / EI``): ``theta(s) = -d ln(1 - d mu_1 c s) /
+    mu_1`` in closed form. The pieces converge to it at second order; constant curvature misses it."""
+    robot = tz.Robot(SEG)
+    q, mu = jnp.array([-3.0, 6.0, 6.0]), (0.2, 0.8)
+    errs = []
+    for m in (1, 4, 16):
+        p, x, sm = _with_friction(robot, q, mu, [d, 0.0, 0.0], m)
+        np.testing.assert_allclose(sm.force(x), 0.0, atol=1e-9)  # the root of the non-conservative force
+        tau = float(sm.k[0] * jnp.maximum(sm.stretch(x), 0.0)[0])
+        c = 4.5 * tau * np.exp(d * mu[0]) / 2454.0
+        s = np.linspace(0.0, 60.0, 20001)
+        th = -d * np.log1p(-d * mu[1] * c * s) / mu[1]
+        ref = np.array([np.trapezoid(np.sin(th), s), np.trapezoid(np.cos(th), s)])
+        errs.append(np.hypot(np.hypot(p[0], p[1]) - ref[0], p[2] - ref[1]))
+    assert errs[2] < 0.02 and errs[1] / errs[2] > 10 and errs[0] > 0.3  # ~16 for second order
+
+
+def test_friction_force_jacobian_is_exact_with_loads_and_segments():
+    """The implicit derivative's ``dF/dx`` in closed form against forward mode, two segments in pieces,
+    wires pulled and released, a tip force and a weight; gradients finite at the straight pose."""
+    robot = tz.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), wire_stiffness=30.0,
+                                backbone_EI=1500.0, preload=1.0),
+                      tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), wire_stiffness=80.0,
+                                backbone_EI=3000.0, preload=1.0)])
+    q = jnp.array([-1.5, 0.4, 0.4, 0.3, -1.0, 0.3, 0.3])
+    d = np.sign(np.asarray(q))
+    load = Load(jnp.array([0.05, -0.1, 0.0]), jnp.array([0.0, 0.002, -0.003]))
+    _, x, sm = _with_friction(robot, q, (0.15, 0.5), d, 3, load)
+    np.testing.assert_allclose(sm.force(x), 0.0, atol=1e-8)
+    np.testing.assert_allclose(sm.force_jacobian(x), jax.jacfwd(sm.force)(x), rtol=1e-6, atol=1e-6)
+
+    jac = jax.jit(jax.jacfwd(lambda mu, q: chain_tip(*_tip_args(robot, mu, q, d))[0], argnums=(0, 1)))
+    for qq in (q, jnp.zeros(7)):
+        assert all(np.all(np.isfinite(np.asarray(J))) for J in jac(jnp.asarray([0.15, 0.5]), qq))
+
+
+def _tip_args(robot, mu, q, d):
+    phys = robot.params()
+    phys["friction"] = mu
+    st = Structure(robot.n_wires_per_segment, 3)
+    return E.piece_lengths(phys, st), E.solve(phys, st, q, jnp.zeros(3), jnp.asarray(d, float))
+
+
 def test_curvature_freedom_interpolates_with_a_first_order_derivative_at_zero():
     robot = tz.Robot(SEG)
     load = Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0]))

@@ -10,17 +10,26 @@ tip force ``f`` (3,) and the robot's weight per unit length ``g`` (3,) (N/mm, ba
     s_k  = (l_k(x) - l_k(0)) - q_k + f_pre,k / k_k               (pull only: a slack wire carries nothing)
 
 (the weight is integrated exactly along each arc, :func:`~._kinematics.segment_weight_moment`).
-``t_k`` is the share of a wire's tension that reaches its segments past friction along the routing
-(capstan): ``t_k = exp(d_k (mu_0 + mu_1 w_k))`` with ``d_k`` the wire's last direction of motion (+1
-released, -1 pulled in, 0 not yet moved), ``mu_0`` the routing before the robot and ``mu_1`` per
-radian of the bending ``w_k = sum_{j crossed} |b_j|`` the wire wraps around in the segments it
-crosses. Without friction (``mu = 0``) the problem is the energy minimisation of MODEL.md; with it,
-``t`` depends on ``x`` and the equilibrium is the root of the generalised force ``F(x)`` (``grad V``
-with ``t = t(x)``), which the Newton iteration below reaches as a fixed point.
+Friction along the routing (capstan) makes the tension decay over every disk a wire crosses, in
+the direction of its motion: the share of wire ``k``'s tension (at the actuator) that acts on piece
+``i`` (a segment, or a piece of one in the rod model) is ``T_ki = exp(d_k (mu_0 + mu_1 w_ki))``, with
+``d_k`` the wire's last direction of motion (+1 released: friction holds the wire back, -1 pulled in:
+it loses tension on the way, 0 not yet moved), ``mu_0`` the routing before the robot and ``mu_1`` per
+radian of the bending ``w_ki = sum_{l < i crossed} |b_l| + |b_i| / 2`` the wire has wrapped around
+before the middle of piece ``i``. A pulled wire then bends its proximal pieces more than its distal
+ones, and a distal segment's wire loses tension to the bending of the proximal segments it crosses.
+The generalised force is ``F(x) = E x + sum_k k_k max(s_k, 0) (T_k * a_k) + (load)`` (``a_k`` the
+wire's row of the routing matrix, ``T_k`` its factors per piece). Without friction (``mu = 0``)
+``F = grad V`` and the problem is the energy minimisation of MODEL.md; with it, friction is not
+conservative: ``T`` depends on ``x`` and ``F`` is no gradient. Within a Newton step, each wire's mean
+factor ``t_k`` stands in ``V``, and the rest of the friction force, ``sum_k tau_k (T_k - t_k) a_k``, is
+frozen at the iterate as a constant force (a linear term of ``V``): ``V``'s gradient there is ``F``,
+so the iteration's fixed point is the root of ``F``.
 
-**Solver.** Damped Newton on ``V`` (``t`` frozen at the iterate): the backbone's and the wires'
-Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a branch-free
-line search: ten step sizes evaluated at once, the largest that satisfies Armijo's condition taken.
+**Solver.** Damped Newton on ``V`` (friction frozen at the iterate, above): the backbone's and the
+wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
+branch-free line search: ten step sizes evaluated at once, the largest that satisfies Armijo's
+condition taken.
 ``max(s, 0)^2`` is only C1, so Newton is exact within a set of taut wires and the line search
 handles set changes. The derivatives come from the implicit function theorem on ``F(x*) = 0``
 (a custom JVP), never from the iterations. Per sample; ``vmap`` it.
@@ -32,8 +41,8 @@ friction make it do so, as in an elastic (Kirchhoff) rod without shear or extens
 pieces converge as ``m`` grows (``O(1/m^2)``, checked against a ``solve_bvp`` solution of the rod
 equations in the tests). It is the same energy (each piece's bending ``EI m |b_i|^2 / (2 L)``, the
 wires' stretch summed over the pieces they cross, the load integrated exactly along every piece),
-so under tendon loads alone every piece of a segment takes the same bending and the segment is
-exactly the constant-curvature one. ``curvature_freedom`` ``r_j`` (S,) in ``[0, 1]`` interpolates:
+so under tendon loads alone and without friction every piece of a segment takes the same bending
+and the segment is exactly the constant-curvature one. ``curvature_freedom`` ``r_j`` (S,) in ``[0, 1]`` interpolates:
 ``1`` is the rod, ``0`` pins every piece to its segment's mean bending (constant curvature, up to
 ``1e-3`` of the rod's variation), by a penalty ``kappa_j |b_i - mean_j b|^2 / 2`` with ``kappa_j =
 EI_j m / L_j (1 - r_j) / (r_j + 1e-3)``; its derivative at ``r = 0`` is the rod's first-order
@@ -212,6 +221,10 @@ class _Sample:
         self.mu = phys["friction"]
         self.direction = direction
         self.crosses = jnp.asarray(structure.piece_crosses, self.A.dtype)
+        # (N, P, P): how much of piece l's bending wire k has wrapped before the middle of piece i
+        before = np.tril(np.ones((structure.n_pieces,) * 2), -1) + 0.5 * np.eye(structure.n_pieces)
+        c = np.asarray(structure.piece_crosses, float)
+        self.wraps = jnp.asarray(c[:, :, None] * c[:, None, :] * before[None], self.A.dtype)
         self.loaded = loaded
 
     def _deviation(self, x):
@@ -224,10 +237,26 @@ class _Sample:
     def _if_loaded(self, fn, x, zero):
         return jax.lax.cond(self.loaded, fn, lambda _: zero, x)
 
+    def piece_factors(self, x):
+        """``T`` (N, P): the share of each wire's tension that acts on each piece, past friction along
+        the routing and over the disks before the piece's middle (1 where the wire does not cross it)."""
+        c = self.crosses
+        wrap = c * _guarded_norm(x.reshape(-1, 2))[None, :]
+        before = jnp.cumsum(wrap, axis=1) - 0.5 * wrap  # pieces are numbered from the base
+        return jnp.where(c > 0, jnp.exp(self.direction[:, None] * (self.mu[0] + self.mu[1] * before)), 1.0)
+
     def factor(self, x):
-        """Share ``t_k`` (N,) of each wire's tension past friction along its routing."""
-        wrap = self.crosses @ _guarded_norm(x.reshape(-1, 2))
-        return jnp.exp(self.direction * (self.mu[0] + self.mu[1] * wrap))
+        """Each wire's mean share ``t_k`` (N,) over the pieces it crosses (the Newton step's ``V``)."""
+        return jnp.sum(self.crosses * self.piece_factors(x), axis=1) / jnp.sum(self.crosses, axis=1)
+
+    def _spread(self, T):
+        """Per-piece factors (N, P) as the routing matrix's columns (N, 2P)."""
+        return jnp.repeat(T, 2, axis=1)
+
+    def friction_rest(self, x, t):
+        """The friction force beyond the mean factors ``t``: ``sum_k tau_k (T_k - t_k) a_k`` (2P,)."""
+        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        return (self.A * (self._spread(self.piece_factors(x)) - t[:, None])).T @ tau
 
     def stretch(self, x):
         return self.A @ x + self.c
@@ -281,8 +310,8 @@ class _Sample:
 
         Its load part is ``-(G_tip^T f + G_M^T g)``; unloaded, the Jacobians ``G`` are constants (their
         change multiplies ``f = g = 0``), so derivatives in ``f`` and ``g`` cost two products."""
-        t = self.factor(x)
-        tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
+        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        wires = (self.A * self._spread(self.piece_factors(x))).T @ tau
 
         def loaded(y):
             Gt, Gm = _load_jacobians(self.lengths, y)
@@ -292,27 +321,38 @@ class _Sample:
             Gt, Gm = jax.lax.stop_gradient(load_jacobians(self.lengths, y))
             return -(Gt.T @ self.f + Gm.T @ self.g)
 
-        return self.E * x + self._deviation(x) + self.A.T @ tau + jax.lax.cond(self.loaded, loaded, unloaded, x)
+        return self.E * x + self._deviation(x) + wires + jax.lax.cond(self.loaded, loaded, unloaded, x)
 
-    def force_jacobian(self, x):
-        """``dF/dx`` (2S, 2S): :meth:`hess` plus the friction share's own change with the bending,
-        ``dt_k/dx = t_k d_k mu_1 sum_j crossed d|b_j|/db_j``."""
-        t = self.factor(x)
+    def friction_matrix(self, x, t):
+        """What friction adds to ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t`` (2P, 2P),
+        zero without friction: the rest of the factors times the taut wires' stiffness, and the
+        factors' own change with the bending, ``dT_ki/db_l = T_ki d_k mu_1 dw_ki/db_l`` with
+        ``dw_ki/db_l = b_l / |b_l|`` for a crossed piece ``l < i`` and half that for ``l = i``."""
+        P = self.crosses.shape[1]
+        T = self.piece_factors(x)
+        stretch = self.stretch(x)
+        taut = (stretch > 0).astype(x.dtype)
+        rest = (self.A * (self._spread(T) - t[:, None])).T @ ((self.k * taut)[:, None] * self.A)
         B = x.reshape(-1, 2)
         nb = _guarded_norm(B)
         unit = B / jnp.where(nb > 0, nb, 1.0)[:, None]  # d|b|/db, 0 at b = 0
-        W = (self.crosses[:, :, None] * unit[None, :, :]).reshape(self.A.shape)  # (N, 2S): dw/dx
-        dt = (t * self.direction * self.mu[1])[:, None] * W
-        tension = self.k * jnp.maximum(self.stretch(x), 0.0)
-        return self.hess(x, t) + self.A.T @ (tension[:, None] * dt)
+        coef = (self.k * jnp.maximum(stretch, 0.0) * self.direction * self.mu[1])[:, None] * T * self.crosses
+        turn = jnp.einsum("kp,kpi,kpl,lj->pilj", coef, self.A.reshape(-1, P, 2), self.wraps, unit)
+        return rest + turn.reshape(2 * P, 2 * P)
+
+    def force_jacobian(self, x):
+        """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`friction_matrix`."""
+        t = self.factor(x)
+        return self.hess(x, t) + self.friction_matrix(x, t)
 
 
 def _newton(sm: _Sample, x0):
-    """Damped Newton on ``V`` (``t`` frozen within a step): the backbone's and the wires' Hessian exact,
+    """Damped Newton on ``V`` (friction frozen within a step): the backbone's and the wires' Hessian exact,
     the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
     the start and without a load), so that a loaded solve converges superlinearly without second
-    derivatives of the chain. Where that matrix is not positive definite the step falls back to the
-    elastic part alone. Steps are capped (``MAX_STEP``) and the largest of ``_STEPS`` with Armijo's
+    derivatives of the chain; with friction, its part of ``dF/dx`` is added (not symmetric: an LU
+    solve) and its force beyond the mean factors is frozen in ``V`` (module notes). Where that step
+    gives no descent the step falls back to the elastic part alone (a Cholesky solve). Steps are capped (``MAX_STEP``) and the largest of ``_STEPS`` with Armijo's
     decrease is taken."""
     steps = jnp.asarray(_STEPS, x0.dtype)
     n = x0.shape[0]
@@ -324,12 +364,16 @@ def _newton(sm: _Sample, x0):
         x, HL, it, _ = state
         t = sm.factor(x)
         gl = sm.load_grad(x)
-        g, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
-        d_full, d_elastic = solve(H + HL, g), solve(H, g)
+        rest = sm.friction_rest(x, t)  # frozen at the iterate: a constant force in V (module notes)
+        g, H = sm.grad(x, t, gl) + rest, sm.newton_matrix(x, t)
+        # the step of the root of F (friction's part of dF/dx is not symmetric: LU), the elastic
+        # part's (Cholesky) where that fails
+        d_full = -jnp.linalg.solve(H + HL + sm.friction_matrix(x, t), g)
+        d_elastic = solve(H, g)
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
         v0 = sm.value(x, t)
-        vs = jax.vmap(lambda s: sm.value(x + s * d, t))(steps)
+        vs = jax.vmap(lambda s: sm.value(x + s * d, t) + s * jnp.dot(rest, d))(steps)
         # Armijo with a round-off allowance, so converged steps are not rejected by noise in V
         ok = vs <= v0 + 1e-4 * steps * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
         step = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0) * d
