@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import minimize, root
 from scipy.spatial.transform import Rotation
 
 DECLARED = {"length_mm": 20.0, "pitch_radius_mm": 2.0, "wire_stiffness_N_per_mm": 75.0,
@@ -350,12 +350,13 @@ class _Robot:
         return g + (self.A * np.repeat(T - 1.0, 2, axis=1)).T @ tau
 
     def equilibrium(self, q, direction, x0):
-        """Friction is not conservative: a fixed point of BFGS minimisations of the energy with each
+        """Friction is not conservative: the root of the force, found by MINPACK's hybrid method from
+        the frictionless minimum, or else by a fixed point of BFGS minimisations of the energy with each
         wire's mean tension factor and, as a constant force, the rest of the friction force, both
         updated from the solution until the force itself vanishes."""
         t, rest, x = np.ones(self.N), np.zeros(2 * self.S), x0
         friction = bool(np.any(self.mu) and np.any(direction))
-        for _ in range(100):
+        for it in range(100):
             # gtol 1e-6: the tip within 1e-6 mm of a 1e-10 solve (checked), at half the cost (1e-8 with
             # friction, whose fixed point needs the force to 1e-7); started from the elastic part's
             # inverse Hessian (backbone and taut wires): BFGS then needs only the load's curvature
@@ -371,6 +372,13 @@ class _Robot:
                          options={"gtol": 1e-8 if friction else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)}).x
             if not friction:
                 break
+            if it == 0:
+                # MINPACK's hybrid method on the force itself, from the first solve: a handful of force
+                # evaluations where the fixed point below takes dozens of BFGS solves; the fixed point
+                # goes on where it does not converge (a wire going slack on the way, say)
+                sol = root(self.force, x, args=(q, direction), method="hybr", options={"xtol": 1e-13})
+                if np.max(np.abs(self.force(sol.x, q, direction))) < 1e-9:
+                    return sol.x
             T = self.factors(x, direction)
             t = np.array([T[k, :self.crossed[k]].mean() for k in range(self.N)])
             tau = self.k * np.maximum(self.A @ x - q + self.pre / self.k, 0.0)

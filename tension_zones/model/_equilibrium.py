@@ -219,6 +219,7 @@ class _Sample:
             self.D = jnp.asarray(np.eye(2 * S * m) - avg, self.A.dtype)  # deviation from the segment mean
         self.f, self.g = f, phys["gravity"]
         self.mu = phys["friction"]
+        self.has_friction = jnp.any(self.mu != 0)
         self.direction = direction
         self.crosses = jnp.asarray(structure.piece_crosses, self.A.dtype)
         # (N, P, P): how much of piece l's bending wire k has wrapped before the middle of piece i
@@ -343,33 +344,44 @@ class _Sample:
     def force_jacobian(self, x):
         """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`friction_matrix`."""
         t = self.factor(x)
-        return self.hess(x, t) + self.friction_matrix(x, t)
+        zero = jnp.zeros((x.shape[0],) * 2, x.dtype)
+        return self.hess(x, t) + jax.lax.cond(self.has_friction, self.friction_matrix, lambda *_: zero, x, t)
 
 
 def _newton(sm: _Sample, x0):
     """Damped Newton on ``V`` (friction frozen within a step): the backbone's and the wires' Hessian exact,
     the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
     the start and without a load), so that a loaded solve converges superlinearly without second
-    derivatives of the chain; with friction, its part of ``dF/dx`` is added (not symmetric: an LU
-    solve) and its force beyond the mean factors is frozen in ``V`` (module notes). Where that step
-    gives no descent the step falls back to the elastic part alone (a Cholesky solve). Steps are capped (``MAX_STEP``) and the largest of ``_STEPS`` with Armijo's
-    decrease is taken."""
+    derivatives of the chain; with friction (a run-time branch on ``mu != 0``), its part of ``dF/dx``
+    is added (not symmetric: an LU solve) and its force beyond the mean factors is frozen in ``V``
+    (module notes); without it the step is a Cholesky solve. Where that step gives no descent the
+    step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
+    ``_STEPS`` with Armijo's decrease is taken."""
     steps = jnp.asarray(_STEPS, x0.dtype)
     n = x0.shape[0]
 
     def solve(H, g):
         return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
+    def with_friction(x, t, H, g0):
+        # the rest of the friction force, frozen at the iterate (a constant force in V, module notes),
+        # and the step to the root of F: friction's part of dF/dx is not symmetric (an LU solve)
+        rest = sm.friction_rest(x, t)
+        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t), g0 + rest)
+
+    def without(x, t, H, g0):  # V's own Newton step (symmetric: Cholesky)
+        return jnp.zeros_like(g0), solve(H, g0)
+
     def body(state):
         x, HL, it, _ = state
         t = sm.factor(x)
         gl = sm.load_grad(x)
-        rest = sm.friction_rest(x, t)  # frozen at the iterate: a constant force in V (module notes)
-        g, H = sm.grad(x, t, gl) + rest, sm.newton_matrix(x, t)
-        # the step of the root of F (friction's part of dF/dx is not symmetric: LU), the elastic
-        # part's (Cholesky) where that fails
-        d_full = -jnp.linalg.solve(H + HL + sm.friction_matrix(x, t), g)
-        d_elastic = solve(H, g)
+        g0, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
+        # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
+        # it stays a branch there, and a robot without friction skips its terms and the LU solve
+        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, H + HL, g0)
+        g = g0 + rest
+        d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
         v0 = sm.value(x, t)
