@@ -62,7 +62,13 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
     Returns ``(theta, cost, iterations, residuals (M, d), Jacobian (M, d, K))`` at the result.
 
     Marquardt's scaling (damping ``lam diag(J'WJ)``), a step accepted only if the cost falls (a
-    non-finite cost is rejected, so a model that fails somewhere just shortens the step).
+    non-finite cost is rejected, so a model that fails somewhere just shortens the step). Bounds by an
+    active set: a parameter on a bound whose gradient points out of the box is held there for the
+    step, and the others take the step of the problem without it (the projected-Newton rule of
+    Bertsekas 1982); clipping the full step instead leaves the others with a step that assumed the
+    held one moves, which the cost test then rejects or shortens again and again (the rod's curvature
+    freedom on its bound of 1 in a calibration: 41 passes, the limit, and 0.1108 mm held out; with the
+    active set 19 passes and 0.0833 mm).
     """
     theta0 = jnp.asarray(theta0)
     P = theta0.shape[0]
@@ -92,14 +98,18 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
 
     def propose(th, r, J, lam):
         sw = w * huber_weights(r, huber)
-        J = J * freeb
-        A = jnp.einsum("nip,niq,n->pq", J, J, sw)
         g = jnp.einsum("nip,ni,n->p", J, r, sw)
+        # a parameter on a bound that the gradient pushes outward stays there: without it in the
+        # step, the others' step is the constrained one (not a clipped unconstrained one)
+        at_lo, at_hi = th[cols] <= lo[cols], th[cols] >= hi[cols]
+        fb = freeb & ~((at_lo & (g > 0)) | (at_hi & (g < 0)))
+        J = J * fb
+        A = jnp.einsum("nip,niq,n->pq", J, J, sw)
         d = jnp.diag(A)
         d = jnp.maximum(d, 1e-12 * jnp.max(d) + 1e-300)
-        A = jnp.where(freeb[:, None] & freeb[None, :], A + lam * jnp.diag(d), eye)
-        step = -jnp.linalg.solve(A, jnp.where(freeb, g, 0.0))
-        return jnp.clip(th + jnp.zeros(P, th.dtype).at[cols].add(jnp.where(freeb, step, 0.0)), lo, hi)
+        A = jnp.where(fb[:, None] & fb[None, :], A + lam * jnp.diag(d), eye)
+        step = -jnp.linalg.solve(A, jnp.where(fb, g, 0.0))
+        return jnp.clip(th + jnp.zeros(P, th.dtype).at[cols].add(jnp.where(fb, step, 0.0)), lo, hi)
 
     # One model evaluation per pass (a single copy of the model in the compiled program): evaluate
     # the candidate, accept it if it lowers the cost (the first pass always does), propose the next.
@@ -114,7 +124,9 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
         th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
         cost = jnp.where(ok, cost_c, cost)
         lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
-        return th, r, J, cost, propose(th, r, J, lam), lam, it + 1, done
+        cand = propose(th, r, J, lam)
+        # no parameter can move (each free one held on its bound): nothing left to try
+        return th, r, J, cost, cand, lam, it + 1, done | jnp.all(cand == th)
 
     def cond(state):
         return (state[6] <= max_iter) & ~state[7]
