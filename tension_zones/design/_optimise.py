@@ -288,6 +288,11 @@ def _span(sc: Scenario) -> float:
     return min(float(sc.delta[-1] - sc.delta[0]), 2 * math.pi)
 
 
+#: :func:`spread` as one program per wire count: run op by op it compiled each of its operations
+#: (4-5 s per wire count for a handful of values)
+_spread_jit = jax.jit(spread)
+
+
 def zero_width_directions(sc: Scenario, design: Design) -> list[float]:
     """The single directions (deg, in [0, 360)) inside the task's range where controllability is
     lost on zero width: point sectors of the design's tension map (a taut set that neither
@@ -300,7 +305,7 @@ def zero_width_directions(sc: Scenario, design: Design) -> list[float]:
     for s in tension_map(design).sectors:
         p = s.start_deg % 360.0
         in_range = s.width_deg == 0 and (p - lo) % 360.0 <= span + 1e-9
-        if in_range and float(spread(design, math.radians(p))) < sc.min_spread:
+        if in_range and float(_spread_jit(design, math.radians(p))) < sc.min_spread:
             out.append(round(p, 9))
     return sorted(set(out))
 
@@ -357,8 +362,9 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
                 steps, with_defl):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
 
-    Returns per start: the best rank (exact objective, plus INFEASIBLE_RANK per violating pose), its
-    variables, and the best-so-far rank after every step, (starts, steps).
+    Returns per start: the best rank (exact objective, plus INFEASIBLE_RANK per violating pose); that
+    iterate's design numbers (pitch radius, wire stiffness, wire angles (n,)), exact objective and
+    pieces (:func:`_objective`); and the best-so-far rank after every step, (starts, steps).
     """
     opt = optax.adam(lr)
 
@@ -366,43 +372,42 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
         d = _design(z, bounds, n, free, arc, base)
         smooth, exact, p = _objective(d, task, n, sharp, with_defl)
         # rank iterates by the exact objective, feasible ones first
-        return smooth, exact + INFEASIBLE_RANK * (p["violations"] + p["statics_infeasible"])
+        rank = exact + INFEASIBLE_RANK * (p["violations"] + p["statics_infeasible"])
+        return smooth, (rank, ((d.pitch_radius, d.wire_stiffness, d.wire_angles), exact, p))
 
     def one_start(z):
         state = opt.init(z)
 
         def step(carry, i):
-            z, state, best, best_z = carry
+            z, state, best, best_out = carry
             sharp = sharp0 * 10.0 ** (i / jnp.maximum(steps - 1, 1))
-            (_, exact), g = jax.value_and_grad(loss, has_aux=True)(z, sharp)
-            improved = exact < best
-            best = jnp.where(improved, exact, best)
-            best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), z, best_z)
+            (_, (rank, out)), g = jax.value_and_grad(loss, has_aux=True)(z, sharp)
+            # the first pass is always kept (so the start stands for itself, were nothing finite),
+            # and a NaN rank is replaced by any later one
+            improved = (rank < best) | (i == 0) | jnp.isnan(best)
+            best = jnp.where(improved, rank, best)
+            best_out = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), out, best_out)
             upd, state = opt.update(g, state, z)
             z = optax.apply_updates(z, upd)
             z = {**z, "r": jnp.clip(z["r"], 0.0, 1.0), "k": jnp.clip(z["k"], 0.0, 1.0)}
-            return (z, state, best, best_z), best
+            return (z, state, best, best_out), jnp.where(jnp.isnan(best), jnp.inf, best)
 
-        init = (z, state, jnp.asarray(jnp.inf), z)
-        (z, _, best, best_z), hist = jax.lax.scan(step, init, jnp.arange(steps))
-        _, exact_last = loss(z, sharp0)
-        better = exact_last < best
-        best_z = jax.tree_util.tree_map(lambda a, b: jnp.where(better, a, b), z, best_z)
-        return jnp.minimum(best, exact_last), best_z, hist
+        # one pass more than the steps: it ranks the last step's result (its update goes unused), and
+        # the best iterate's pieces ride along, so the program holds one copy of the objective and
+        # nothing else compiles it (a copy to rank the last step and the objective's own program for
+        # the best's pieces cost 4.9 and 4.2 s of compile per wire count: notebook 04's scenario)
+        out0 = jax.eval_shape(lambda z: loss(z, sharp0)[1][1], z)
+        init = (z, state, jnp.asarray(jnp.inf), jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), out0))
+        (_, _, best, best_out), hist = jax.lax.scan(step, init, jnp.arange(steps + 1))
+        return jnp.where(jnp.isnan(best), jnp.inf, best), best_out, hist[1:]
 
     return jax.vmap(one_start)(z0)
 
 
-def _evaluate(z, bounds, task, base, n, free, arc, with_defl):
-    d = _design(z, bounds, n, free, arc, base)
-    _, exact, pieces = _objective_jit(d, task, n, 1.0, with_defl)
-    return d, exact, pieces
-
-
-def _initial(sc: Scenario, n: int, key) -> dict:
+@functools.partial(jax.jit, static_argnames=("S", "n", "n_gaps"))
+def _initial(key, S: int, n: int, n_gaps: int) -> dict:
+    """``S`` starts' unconstrained variables (one program: run op by op, about 1 s per wire count)."""
     k1, k2, k3, k4 = jax.random.split(key, 4)
-    S = sc.starts
-    n_gaps = n + 1 if sc.forbidden_arc is not None else n
     z = {
         "r": jax.random.uniform(k1, (S,)),
         "k": jax.random.uniform(k2, (S,)),
@@ -455,14 +460,14 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
         key, sub = jax.random.split(key)
         bounds, base = _bounds(sc, n), _base(sc, n)
         free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
-        best, best_z, h = _run_starts(_initial(sc, n, sub), bounds, task, base,
-                                      jnp.asarray(sc.learning_rate), jnp.asarray(sc.sharpness),
-                                      n=n, free=free, arc=arc, steps=sc.steps,
-                                      with_defl=sc.w_deflection > 0)
+        z0 = _initial(sub, S=sc.starts, n=n, n_gaps=n + 1 if arc else n)
+        best, out, h = _run_starts(z0, bounds, task, base, jnp.asarray(sc.learning_rate),
+                                   jnp.asarray(sc.sharpness), n=n, free=free, arc=arc, steps=sc.steps,
+                                   with_defl=sc.w_deflection > 0)
         evaluations += sc.starts * (sc.steps + 1)
-        i = int(jnp.argmin(best))
-        z = jax.tree_util.tree_map(lambda a: a[i], best_z)
-        d, exact, pieces = _evaluate(z, bounds, task, base, n, free, arc, sc.w_deflection > 0)
+        i = int(np.argmin(np.asarray(best)))
+        (r, k, angles), exact, pieces = jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out)
+        d = base.replace(pitch_radius=float(r), wire_stiffness=float(k), wire_angles=angles)
         rows.append(_result_row(sc, n, d, exact, pieces))
         hist[str(n)] = np.asarray(h[i]).tolist()
     feasible = [r for r in rows if r.get("feasible")]
