@@ -395,7 +395,8 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
         # one pass more than the steps: it ranks the last step's result (its update goes unused), and
         # the best iterate's pieces ride along, so the program holds one copy of the objective and
         # nothing else compiles it (a copy to rank the last step and the objective's own program for
-        # the best's pieces cost 4.9 and 4.2 s of compile per wire count: notebook 04's scenario)
+        # the best's pieces cost about 4.4 and 4.9 s of trace and compile per wire count: notebook
+        # 04's scenario, 4 wires)
         out0 = jax.eval_shape(lambda z: loss(z, sharp0)[1][1], z)
         init = (z, state, jnp.asarray(jnp.inf), jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), out0))
         (_, _, best, best_out), hist = jax.lax.scan(step, init, jnp.arange(steps + 1))
