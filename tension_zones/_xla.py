@@ -17,6 +17,7 @@ import os
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
 _FUSION = "xla_cpu_use_fusion_emitters"
+_LLVM_LEVEL = "xla_backend_optimization_level"
 
 
 def with_scheduler_off(flags: str) -> str:
@@ -72,15 +73,24 @@ def fast_compile_options() -> dict:
     optimisation's first call 33.6 / 27.9 -> 21.6 / 25.9 s; the identification's first call 10.2 / 10.5
     -> 8.8 / 7.6 s (a later call 0.15-0.17 s either way). Results equal to 1e-15. The sweeps keep
     XLA's defaults (their run time matters). JAX takes such options on top-level jits only; older
-    jaxlibs do not know the switch (nor have those emitters): no options there.
+    jaxlibs do not know the switch (nor have those emitters): no fusion option there.
+
+    LLVM's optimisation level is pinned at XLA's default (3): these programs run long (a calibration's
+    fits), so a process-wide lower level meant for many small programs (the test suite's:
+    ``tests/conftest.py``) must not reach them. At level 0 the 500-sample calibration's two programs
+    compiled in 6.8 / 8.0 s instead of 11.1 / 13.6 s, but its fits and evaluations ran 2.5 / 0.9 ->
+    4.1 / 3.1 s, and the end-to-end calibration tests took 261 s instead of 230 s.
     """
-    return {_FUSION: False} if _jaxlib_version() >= (0, 5, 3) else {}
+    opts = {_LLVM_LEVEL: 3}
+    if _jaxlib_version() >= (0, 5, 3):
+        opts[_FUSION] = False
+    return opts
 
 
 def fast_compile_flag() -> str:
     """The same switch for a whole process, as an ``XLA_FLAGS`` entry ("" where jaxlib lacks it): for
     work made of many small programs, such as the test suite, whose compile time is most of its time."""
-    return f"--{_FUSION}=false" if fast_compile_options() else ""
+    return f"--{_FUSION}=false" if _FUSION in fast_compile_options() else ""
 
 
 # -- programs kept on disk before tracing ------------------------------------------------------------

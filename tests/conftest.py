@@ -18,8 +18,13 @@ if "TENSION_ZONES_CACHE" not in os.environ:
 # test_xla_cache.py compares against, in a child process without it.
 from tension_zones._xla import fast_compile_flag  # (no JAX import)
 
-if (_flag := fast_compile_flag()) and _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
+# For the same reason LLVM optimises the suite's programs at level 0 (XLA's default: 3), except the
+# package's long-running ones, which pin level 3 (``fast_compile_options``): the model, rod and robot
+# tests 227.9 -> 155.7 s on 2 cores, one run after the other. Results are the same (no fast math either way).
+_LEVEL_0 = "--xla_backend_optimization_level=0"
+for _flag in (fast_compile_flag(), _LEVEL_0):
+    if _flag and _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
 
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
@@ -41,6 +46,20 @@ def d3():
 @pytest.fixture
 def d4():
     return tz.Design(4, 20.0, 2.0)
+
+
+@pytest.fixture
+def default_codegen_env():
+    """``os.environ`` for a child process that compiles at LLVM's default level (the suite's level 0
+    left out), with a function ``(**changes) -> env`` adding ``XLA_FLAGS`` entries and variables: for
+    the tests of bit-for-bit equal results over other device layouts, which the package's codegen gives
+    and level 0 does not (there a few sweep values differ in the last bit between batch shapes)."""
+    flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if f != _LEVEL_0)
+
+    def env(extra_flags="", **changes):
+        return dict(os.environ, XLA_FLAGS=f"{flags} {extra_flags}".strip(), **changes)
+
+    return env
 
 
 @pytest.fixture

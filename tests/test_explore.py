@@ -226,26 +226,36 @@ DISTRIBUTED = textwrap.dedent("""
 """)
 
 
+ONE_PROCESS = textwrap.dedent("""
+    import json, sys
+    import tension_zones as tz
+    tz.explore(tz.parse_space(json.loads(sys.argv[2])), sys.argv[1], quiet=True)
+""")
+
+
 def free_port():
     with socket.socket() as s:
         s.bind(("localhost", 0))
         return s.getsockname()[1]
 
 
-def test_two_jax_distributed_processes_give_the_same_table(tmp_path):
+def test_two_jax_distributed_processes_give_the_same_table(tmp_path, default_codegen_env):
     """Acceptance: two processes on localhost (CPU) give the one-process table, bit for bit. Each has
-    two local devices, over which each chunk's designs are split (here: one device)."""
-    env = dict(os.environ, JAX_PLATFORMS="cpu",  # (the suite's own XLA flags too: the same codegen as here)
-               XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=2",
-               PYTHONPATH=os.pathsep.join([str(Path(__file__).parents[1])] + sys.path))
+    two local devices, over which each chunk's designs are split; the one process has one device (a
+    child too, with the same codegen)."""
+    path = os.pathsep.join([str(Path(__file__).parents[1])] + sys.path)
+    env = default_codegen_env("--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu", PYTHONPATH=path)
     port, out = str(free_port()), tmp_path / "two"
     procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, port, str(i), str(out), json.dumps(SPACE)],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
              for i in (0, 1)]
-    one = tz.explore(tz.parse_space(SPACE), tmp_path / "one", quiet=True)  # meanwhile, here
+    procs.append(subprocess.Popen([sys.executable, "-c", ONE_PROCESS, str(tmp_path / "one"), json.dumps(SPACE)],
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                                  env=default_codegen_env(JAX_PLATFORMS="cpu", PYTHONPATH=path)))
     outs = [p.communicate(timeout=300) for p in procs]
     for p, (o, e) in zip(procs, outs):
         assert p.returncode == 0, e[-3000:]
+    one = dict(np.load(tmp_path / "one" / "table.npz"))
     # 5 chunks: process 0 takes 0, 2, 4 and process 1 takes 1, 3; process 0 writes the table
     assert "process 0 of 2 table True chunks 3 devices 2" in outs[0][0]
     assert "process 1 of 2 table False chunks 2 devices 2" in outs[1][0]

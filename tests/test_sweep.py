@@ -144,10 +144,10 @@ SHARDED = textwrap.dedent("""
 
 
 @pytest.mark.slow
-def test_sharded_over_four_devices_gives_identical_results():
-    env = dict(os.environ, XLA_FLAGS=f"{os.environ.get('XLA_FLAGS', '')} --xla_force_host_platform_device_count=4",
-               PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
-                                          + sys.path))
+def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
+    env = default_codegen_env("--xla_force_host_platform_device_count=4",
+                              PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
+                                                         + sys.path))
     r = subprocess.run([sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env,
                        timeout=600)
     assert r.returncode == 0, r.stderr[-2000:]

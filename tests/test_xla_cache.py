@@ -48,10 +48,12 @@ def test_a_fresh_process_uses_the_cache_and_a_users_jax_setting_wins(tmp_path):
 def test_fast_compile_options_only_where_jaxlib_has_them_and_change_no_result(monkeypatch):
     from tension_zones import _xla
 
+    level = {"xla_backend_optimization_level": 3}
     for version, expected in (((0, 4, 30), {}), ((0, 5, 1), {}), ((0, 5, 3), {"xla_cpu_use_fusion_emitters": False}),
                               ((0, 10, 2), {"xla_cpu_use_fusion_emitters": False})):
         monkeypatch.setattr(_xla, "_jaxlib_version", lambda v=version: v)
-        assert _xla.fast_compile_options() == expected, version
+        assert _xla.fast_compile_options() == {**level, **expected}, version
+        assert _xla.fast_compile_flag() == "".join(f"--{k}=false" for k in expected), version
     monkeypatch.undo()
     assert len(_xla._jaxlib_version()) >= 2  # the installed jaxlib's version is read
 
@@ -76,7 +78,7 @@ print("equal")
     out = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, XLA_FLAGS=flags), capture_output=True,
                          text=True, check=False)
     assert out.returncode == 0 and out.stdout.strip() == "equal", out.stderr[-2000:]
-    if _xla.fast_compile_options():  # the suite runs with the same switch for the whole process
+    if _xla.fast_compile_flag():  # the suite runs with the same switch for the whole process
         assert _xla.fast_compile_flag() in os.environ["XLA_FLAGS"]
 
 
