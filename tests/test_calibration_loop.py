@@ -5,6 +5,7 @@ Each library effect alone, pairs, no effect (nothing may be added), an effect ou
 and the command line end to end. Sets are small (240 samples) so the whole file runs in about a minute.
 """
 
+import dataclasses
 import json
 
 import numpy as np
@@ -12,7 +13,7 @@ import pytest
 from simulator import Truth, write_set
 
 import tension_zones as tz
-from tension_zones.calibration import calibrate, read_csv
+from tension_zones.calibration import calibrate, read_csv, rmse
 from tension_zones.cli import main
 
 ALONE = {
@@ -64,6 +65,32 @@ def test_each_effect_alone_is_found(tmp_path, effect):
     assert rep["rmse_before_mm"] > 1.5 * rep["noise_floor_mm"]  # the effect mattered
     assert rep["rmse_after_mm"] < 1.3 * rep["noise_floor_mm"]
     assert not rep["unexplained_structure"]
+
+
+def test_the_final_refit_takes_every_sample_of_the_data_file_and_nothing_of_the_validation_file(tmp_path):
+    """The held-out errors are the training part's fit's (out of sample); the chosen model is then
+    refitted on every sample of the data file, which gives the parameters and the validation error;
+    the validation file never moves it."""
+    csv, dj = write_set(tmp_path, "t", ALONE["backlash"], 240, seed=1)
+    vcsv, _ = write_set(tmp_path, "v", ALONE["backlash"], 120, seed=2)
+    design = tz.Design.from_json(dj)
+    data, val = (read_csv(p, design.n_wires, float(design.length)) for p in (csv, vcsv))
+    res = calibrate(data, design, validate=val)
+    rep, pb, act = res.to_json(), res.problem, res.active
+    assert names(rep) == ["backlash"]
+    r_sel, r_fin = pb.residuals(res.theta_selected, act), pb.residuals(res.theta_after, act)
+    assert rep["rmse_after_mm"] == pytest.approx(rmse(r_sel[res.held]), rel=1e-12)
+    assert rep["rmse_validate_mm"] == pytest.approx(rmse(r_fin[res.val]), rel=1e-12)
+    assert rep["steps"][-1]["rmse_validate_mm"] == rep["rmse_validate_mm"]
+    assert rep["model"]["theta"] == res.theta_after.tolist()
+    fitted = res.train | res.held
+    assert rep["rmse_refit_mm"] == pytest.approx(rmse(r_fin[fitted]), rel=1e-12)
+    assert rmse(r_fin[fitted]) <= rmse(r_sel[fitted]) and rmse(r_fin[res.held]) < rmse(r_sel[res.held])
+    # a validation file measured 5 mm off changes its error, not the model
+    moved = calibrate(data, design, validate=dataclasses.replace(val, p=val.p + 5.0))
+    assert [e["name"] for e in moved.effects] == ["backlash"]
+    np.testing.assert_allclose(moved.theta_after, res.theta_after, rtol=0, atol=1e-12)
+    assert moved.rmse["validate"] > res.rmse["validate"] + 3.0
 
 
 def test_recovered_values(tmp_path):

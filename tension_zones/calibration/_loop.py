@@ -27,6 +27,14 @@ For any robot (one segment or many) and any reader:
    error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
    before the selection is over.
+5. Refit the chosen model on every sample of the data file, the held-out part too (the hold-out has
+   made its decisions; what it was kept out for is done, as in cross-validation's final refit): the
+   reported parameters, their deviations and the prediction of a validation file are this fit's, the
+   held-out errors and the structure test the training part's fit's, which never saw those samples.
+   Where a validation file is given, every accepted model of the effect-by-effect steps is refitted
+   so too. Measured on FTDCR v4 (the same effects chosen): validation 6.592 -> 6.150 mm (aligned
+   6.293 -> 5.904 mm). Where the loop's fits run on their own rows (large recordings:
+   :meth:`Problem._fit_rows`), this refit has more rows and runs one more program.
 """
 
 from __future__ import annotations
@@ -78,6 +86,9 @@ class Result:
     noise: dict
     theta_declared: np.ndarray
     theta_before: np.ndarray
+    #: the chosen model as the loop fitted it (training part): the held-out errors are its
+    theta_selected: np.ndarray
+    #: the chosen model refitted on every sample of the data file: parameters, validation
     theta_after: np.ndarray
     std_after: np.ndarray
     nominal: list
@@ -122,6 +133,7 @@ class Result:
             "rmse_before_mm": self.rmse["before"],
             "rmse_after_mm": self.rmse["after"],
             "rmse_train_after_mm": self.rmse["train_after"],
+            "rmse_refit_mm": self.rmse["refit"],
             "noise_floor_mm": self.noise["floor_mm"],
             "noise": self.noise,
             "nominal_parameters": list(self.nominal),
@@ -203,15 +215,15 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         noise = None
     sigma = None if noise is None else np.asarray(noise["sigma_mm"])
 
-    def fit(theta0, active):
+    def fit(theta0, active, weights=w_train):
         if not robust:
-            return pb.fit(theta0, active, w_train)
-        th = theta0
+            return pb.fit(theta0, active, weights)
+        th, mask = theta0, weights > 0
         for _ in range(2):  # the Huber threshold follows the residual's scale (3.5 noise sigmas at least)
-            r = pb.residuals(th, active)[train]
+            r = pb.residuals(th, active)[mask]
             scale = np.median(np.linalg.norm(r, axis=1)) / 1.54  # median of a 3-D chi is 1.54 sigma
             c = max(2.5 * scale, 3.5 * (float(np.mean(sigma)) if sigma is not None else scale))
-            th = pb.fit(th, active, w_train, huber_c=c)
+            th = pb.fit(th, active, weights, huber_c=c)
         return th
 
     def decision_error(r, mask):
@@ -374,19 +386,23 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         if accepted is None:
             break
 
-    # the final model: its effects' parameters (later effects refit earlier ones), deviations,
-    # identifiability, the structure left
-    r_after, J_after = pb.jacobian(theta, active)
-    free = pb.mask(active)
-    std = parameter_std(J_after, r_after, free, w_train)
-    for e in effects:
-        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
-        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
-    corr = correlations(J_after, free, w_train, pb.labels(active))
+    # the selection is over: the structure left, on the held-out residual of the model fitted
+    # without those samples
+    plain_after, err_after, r_after = held_error(theta, active)
     feats = features(full, _base_frame_prediction(pb, theta_before, active[: len(nominal_names)]))
     held_feats = {k: v[held] for k, v in feats.items()}
     structure = structure_test(r_after[held], held_feats, sigma)
-    plain_after, err_after, _ = held_error(theta, active)
+    # the final model: refitted on every sample of the data file (step 5 above); its effects'
+    # parameters (later effects refit earlier ones), deviations, identifiability
+    w_all = (train | held).astype(float)
+    theta_sel, theta = theta, fit(theta, active, w_all)
+    r_final, J_final = pb.jacobian(theta, active)
+    free = pb.mask(active)
+    std = parameter_std(J_final, r_final, free, w_all)
+    for e in effects:
+        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
+        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
+    corr = correlations(J_final, free, w_all, pb.labels(active))
     # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
     # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
     log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
@@ -398,26 +414,29 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         or (excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z)
     )
     rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
-              "train_after": rmse(r_after[train])}
+              "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}
     steps = []
     families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
-    for act, th in models:  # the validation file, predicted only now, for every accepted model
+    for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
         rr = pb.residuals(th, act)
+        # the validation file by the model refitted on every sample, as the final one (the last is it)
+        rv = rr if not val.any() else r_final if i == len(models) - 1 else pb.residuals(fit(th, act, w_all), act)
         step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
-                "rmse_validate_mm": rmse(rr[val]) if val.any() else None,
-                "rmse_validate_aligned_mm": rmse_aligned(rr[val]) if val.any() else None}
+                "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
+                "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None}
         if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
             step["rmse_by_family_mm"] = {
-                part: {f: rmse(rr[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
-                for part, mask in (("held_out", held), ("validate", val)) if mask.any()}
+                part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
+                for part, mask, r in (("held_out", held, rr), ("validate", val, rv)) if mask.any()}
         steps.append(step)
     bl = None
     if val.any():
-        rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_after[val]), rmse_aligned(r_after[val])
+        rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
         bl = baselines(full, train, held, val)
         say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
     return Result(problem=pb, train=train, held=held, val=val, holdout=data.split_description(holdout),
-                  noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_after=theta,
+                  noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_selected=theta_sel,
+                  theta_after=theta,
                   std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
                   rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
                   robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,

@@ -44,9 +44,10 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
     plt = _pyplot()
     pb, feats = res.problem, res.features
     mask = res.train | res.held
+    # the fits on the training part: the held-out samples' residuals are out of sample
     comps = {"before (nominal fit)": _components(pb.residuals(res.theta_before, res.nominal), feats),
              "after (" + (", ".join(e["name"] for e in res.effects) or "no effect added") + ")":
-                 _components(pb.residuals(res.theta_after, res.active), feats)}
+                 _components(pb.residuals(res.theta_selected, res.active), feats)}
     lim = 1.1 * max(np.percentile(np.abs(c[mask]), 99.5) for c in comps.values())
     xlabels = {"bending_direction": "bending direction (deg, base frame)",
                "motion": "motion rel. to bending dir. (deg; 0 = bending further)"}
@@ -86,7 +87,9 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
     on_val = bool(res.val.any())
     mask = res.val if on_val else res.held
     m = res.problem.data.p[mask]
-    p = res.predicted()[mask]
+    # the validation file by the final model (refitted on every sample), the held-out part by the fit
+    # that never saw it
+    p = res.predicted(None if on_val else res.theta_selected)[mask]
     err = float(np.sqrt(np.mean(np.sum((p - m) ** 2, axis=1))))
     what = "validation file" if on_val else "held-out part"
     best = None
@@ -152,6 +155,9 @@ def markdown(report: dict) -> str:
               f"{report['n_train']}, held out: {report['n_held_out']} ({report['holdout']}). "
               + (f"Validation: `{Path(report['validate']).name}`, {report['n_validate']} samples, only predicted "
                  "after the selection. " if val and report.get("validate") else "")
+              + f"Held-out errors are those of the models fitted on the training part; the chosen model is then "
+              f"refitted on all {report['n_samples']} samples (RMSE {_f(report.get('rmse_refit_mm'))} mm on them), and "
+              f"its parameters{' and validation errors' if val else ''} are that fit's. "
               + f"Loss: {'Huber (robust)' if report['robust'] else 'least squares'}. "
               f"Nominal parameters always fitted: {', '.join(report['nominal_parameters'])}.", ""]
     lines += ["## Before and after (tip-position RMSE, mm)", "",
@@ -239,7 +245,7 @@ def markdown(report: dict) -> str:
               f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
     lines += ["## Final parameters", "",
               "`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
-              "in report units; `std`: linearised standard deviations from the training fit (optimistic: "
+              "in report units (the refit on every sample); `std`: linearised standard deviations from that fit (optimistic: "
               "consecutive samples are correlated).", "", "```", json.dumps(report["parameters"], indent=1), "```",
               "", "## Plots", ""]
     for f in report["plots"]:
