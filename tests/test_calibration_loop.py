@@ -82,6 +82,8 @@ def test_the_final_refit_takes_every_sample_of_the_data_file_and_nothing_of_the_
     assert rep["rmse_after_mm"] == pytest.approx(rmse(r_sel[res.held]), rel=1e-12)
     assert rep["rmse_validate_mm"] == pytest.approx(rmse(r_fin[res.val]), rel=1e-12)
     assert rep["steps"][-1]["rmse_validate_mm"] == rep["rmse_validate_mm"]
+    assert rep["steps"][-1]["rmse_held_out_mm"] == rep["rmse_after_mm"]  # the selected model, not refitted
+    assert rep["steps"][0]["rmse_held_out_mm"] == pytest.approx(rep["rmse_before_mm"], rel=1e-12)
     assert rep["model"]["theta"] == res.theta_after.tolist()
     fitted = res.train | res.held
     assert rep["rmse_refit_mm"] == pytest.approx(rmse(r_fin[fitted]), rel=1e-12)

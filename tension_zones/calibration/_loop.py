@@ -418,9 +418,10 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     steps = []
     families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
     for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
-        rr = pb.residuals(th, act)
+        last = i == len(models) - 1  # the selected model: its residuals are r_after, its refit r_final
+        rr = r_after if last else pb.residuals(th, act)
         # the validation file by the model refitted on every sample, as the final one (the last is it)
-        rv = rr if not val.any() else r_final if i == len(models) - 1 else pb.residuals(fit(th, act, w_all), act)
+        rv = rr if not val.any() else r_final if last else pb.residuals(fit(th, act, w_all), act)
         step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
                 "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
                 "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None}
