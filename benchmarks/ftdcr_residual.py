@@ -13,7 +13,7 @@ and asks where the residual's dependence on the acquisition order comes from (th
   (creep, temperature, a tracker moving) is drift, both fitted together;
 - **tracker latency**: the residual along the predicted direction of motion (a late tracker lags: a
   negative mean);
-- and the RMSE per pattern family.
+- the RMSE per pattern family, and how far the tip moves from home, measured against predicted.
 Prints a Markdown summary (the numbers in ``benchmarks/README.md``, *What is left on the FTDCR v4*).
 """
 
@@ -29,6 +29,7 @@ from tension_zones.calibration._data import pattern_family
 
 HOME_MM = 0.35
 BACK = 15
+DEFLECTION_MM = 40.0
 
 
 def main():
@@ -62,6 +63,15 @@ def main():
     a = np.sum(r[m] * vel[m] / speed[m, None], axis=1)
     print(f"latency: residual along the motion {a.mean():+.2f} mm (mean over {m.sum()} moving samples, "
           f"median step {np.median(speed[m]):.1f} mm per sample)")
+    # how far the tip moves from home, measured against predicted (each from its own home tip), by family
+    fam = np.concatenate([[pattern_family(g) for g in d.groups] for d in data.values()])
+    p_hat = np.concatenate([pred["train"], pred["val"]])
+    dm = np.linalg.norm(both.p - np.median(both.p[h["index"]], axis=0), axis=1)
+    dp = np.linalg.norm(p_hat - np.median(p_hat[h["index"]], axis=0), axis=1)
+    big = dp > DEFLECTION_MM
+    print(f"deflection from home, measured / predicted (median over predicted deflections above {DEFLECTION_MM:.0f} mm): "
+          + ", ".join(f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"
+                      for f in dict.fromkeys(fam) if (k := big & (fam == f)).any()))
 
 
 if __name__ == "__main__":

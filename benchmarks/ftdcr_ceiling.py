@@ -1,0 +1,77 @@
+"""How far the effect library can take the FTDCR v4 robot on its validation file.
+
+    python benchmarks/ftdcr_ceiling.py
+
+Starts from the shipped report's final model (``tension_zones/examples/ftdcr_v4/calibration.json``:
+its effects and parameters) and refits it, alone, with each library effect it does not hold, and with
+all of them at once, two ways:
+
+- on every sample of ``train.csv`` (what the loop's final refit does; ``val.csv`` is only predicted):
+  the validation error a user would get had the loop added that effect as well;
+- on ``train.csv`` and ``val.csv`` together (one set of parameters for the one robot): ``val.csv`` is
+  then no validation at all, but its error says how close that model can come to both recordings at
+  once, i.e. whether a validation target is within the model's reach (each refit: at most
+  ``ITERATIONS`` Levenberg-Marquardt passes from the final model).
+
+The rod (``variable_curvature``) is left out: with the one load this robot has it moves nothing by
+more than 0.13 mm (``benchmarks/ftdcr_rod.py``). Prints a Markdown table (``benchmarks/README.md``).
+Nothing here feeds a decision of the loop.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+
+import tension_zones as tz
+from tension_zones.calibration import read_opencr, rmse
+from tension_zones.calibration._data import pattern_family
+from tension_zones.calibration._model import RobotModel
+from tension_zones.calibration._problem import Problem
+from tension_zones.calibration.effects import BY_NAME
+
+#: Iterations of each refit (the loop's default is 40; these start from the final model, not from null).
+ITERATIONS = 80
+
+
+def main():
+    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
+    report = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
+    train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=robot.n_wires)
+    val = read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=robot.n_wires, servo_ids=train.servo_ids)
+    m = report["model"]
+    pb = Problem(RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]))
+    vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
+    w_train, w_both = (~vmask).astype(float), np.ones(vmask.size)
+    fam = np.array([pattern_family(g) for g in val.groups])
+    theta0, final = np.asarray(m["theta"], float), list(m["active"])
+    extra = [n for n in m["blocks"] if n not in final and n != "variable_curvature"]
+    print(f"final model: {' + '.join(final)}", flush=True)
+    rows = []
+    for add in [None] + [[e] for e in extra] + [extra]:
+        active = final + (add or [])
+        t0 = time.perf_counter()
+        th = pb.fit(theta0, active, w_train, max_iter=ITERATIONS)
+        r = pb.residuals(th, active)
+        th_both = pb.fit(th, active, w_both, max_iter=ITERATIONS)
+        r_both = pb.residuals(th_both, active)
+        row = {"model": "final" if not add else f"final + {add[0]}" if len(add) == 1 else "final + all of them", "train_mm": rmse(r[~vmask]),
+               "validate_mm": rmse(r[vmask]), "validate_in_fit_mm": rmse(r_both[vmask]),
+               "train_in_joint_fit_mm": rmse(r_both[~vmask]),
+               "by_family_mm": {f: [rmse(r[vmask][fam == f]), rmse(r_both[vmask][fam == f])] for f in dict.fromkeys(fam)},
+               "seconds": time.perf_counter() - t0}
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+    print("\n| model | train (fitted on train) | val (predicted) | val (fitted on train + val) | "
+          "train (fitted on train + val) |\n|---|---:|---:|---:|---:|")
+    for r in rows:
+        print(f"| {r['model']} | {r['train_mm']:.2f} | {r['validate_mm']:.2f} | {r['validate_in_fit_mm']:.2f} | "
+              f"{r['train_in_joint_fit_mm']:.2f} |")
+    print("\nThe final model by family of val.csv (predicted / fitted on train + val): "
+          + ", ".join(f"{f} {a:.2f} / {b:.2f} mm" for f, (a, b) in rows[0]["by_family_mm"].items()))
+
+
+if __name__ == "__main__":
+    main()
