@@ -23,10 +23,10 @@ from __future__ import annotations
 import json
 import time
 
+import _ftdcr  # (benchmarks/, the script's folder)
 import numpy as np
 
-import tension_zones as tz
-from tension_zones.calibration import read_opencr, rmse
+from tension_zones.calibration import rmse
 from tension_zones.calibration._data import pattern_family
 from tension_zones.calibration._model import RobotModel
 from tension_zones.calibration._problem import Problem
@@ -37,10 +37,7 @@ ITERATIONS = 80
 
 
 def main():
-    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
-    report = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
-    train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=robot.n_wires)
-    val = read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=robot.n_wires, servo_ids=train.servo_ids)
+    robot, report, train, val = _ftdcr.load()
     m = report["model"]
     pb = Problem(RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]))
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples

@@ -19,12 +19,10 @@ Prints a Markdown summary (the numbers in ``benchmarks/README.md``, *What is lef
 
 from __future__ import annotations
 
-import json
-
+import _ftdcr  # (benchmarks/, the script's folder)
 import numpy as np
 
-import tension_zones as tz
-from tension_zones.calibration import home_memory, predict_report, read_opencr, rmse
+from tension_zones.calibration import home_memory, predict_report, rmse
 from tension_zones.calibration._data import pattern_family
 
 HOME_MM = 0.35
@@ -33,10 +31,7 @@ DEFLECTION_MM = 40.0
 
 
 def main():
-    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
-    report = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
-    tr = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=robot.n_wires)
-    va = read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=robot.n_wires, servo_ids=tr.servo_ids)
+    robot, report, tr, va = _ftdcr.load()
     print(f"model: {' + '.join(report['model']['active'])}")
     pred = {"train": predict_report(report, robot, tr), "val": predict_report(report, robot, va)}
     data = {"train": tr, "val": va}

@@ -20,10 +20,11 @@ import json
 import time
 from pathlib import Path
 
+import _ftdcr  # (benchmarks/, the script's folder)
 import numpy as np
 
 import tension_zones as tz
-from tension_zones.calibration import read_opencr, rmse, rmse_aligned
+from tension_zones.calibration import rmse, rmse_aligned
 from tension_zones.calibration._loop import _initial
 from tension_zones.calibration._model import RobotModel
 from tension_zones.calibration._problem import Problem
@@ -34,10 +35,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=str(tz.example_path("ftdcr_v4/calibration.json").with_name("rod_vs_cc.json")))
     a = ap.parse_args(argv)
-    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
-    report = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
-    train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=robot.n_wires)
-    val = read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=robot.n_wires, servo_ids=train.servo_ids)
+    robot, report, train, val = _ftdcr.load()
     fit_rows, held = train.split(0.25)
     full = train.concat(val)
     pad = np.zeros(val.n_samples, bool)
