@@ -54,10 +54,11 @@ def main():
         r = pb.residuals(th, active)
         th_both = pb.fit(th, active, w_both, max_iter=ITERATIONS)
         r_both = pb.residuals(th_both, active)
-        row = {"model": "final" if not add else f"final + {add[0]}" if len(add) == 1 else "final + all of them", "train_mm": rmse(r[~vmask]),
-               "validate_mm": rmse(r[vmask]), "validate_in_fit_mm": rmse(r_both[vmask]),
-               "train_in_joint_fit_mm": rmse(r_both[~vmask]),
-               "by_family_mm": {f: [rmse(r[vmask][fam == f]), rmse(r_both[vmask][fam == f])] for f in dict.fromkeys(fam)},
+        name = "final" if not add else f"final + {add[0]}" if len(add) == 1 else "final + all of them"
+        rv, rv_both = r[vmask], r_both[vmask]
+        row = {"model": name, "train_mm": rmse(r[~vmask]), "validate_mm": rmse(rv),
+               "validate_in_fit_mm": rmse(rv_both), "train_in_joint_fit_mm": rmse(r_both[~vmask]),
+               "by_family_mm": {f: [rmse(rv[fam == f]), rmse(rv_both[fam == f])] for f in dict.fromkeys(fam)},
                "seconds": time.perf_counter() - t0}
         rows.append(row)
         print(json.dumps(row), flush=True)

@@ -64,8 +64,8 @@ def main():
     dm = np.linalg.norm(both.p - np.median(both.p[h["index"]], axis=0), axis=1)
     dp = np.linalg.norm(p_hat - np.median(p_hat[h["index"]], axis=0), axis=1)
     big = dp > DEFLECTION_MM
-    print(f"deflection from home, measured / predicted (median over predicted deflections above {DEFLECTION_MM:.0f} mm): "
-          + ", ".join(f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"
+    print("deflection from home, measured / predicted (median over predicted deflections above "
+          f"{DEFLECTION_MM:.0f} mm): " + ", ".join(f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"
                       for f in dict.fromkeys(fam) if (k := big & (fam == f)).any()))
 
 
