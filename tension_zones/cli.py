@@ -309,6 +309,8 @@ def cmd_calibrate(args) -> None:
     from .calibration.effects import library as default_library
     from .model import Robot
 
+    if args.workers is not None and args.workers < 0:
+        raise CLIError(f"--workers must be 0 or more, got {args.workers}")
     out = _out_dir(args.out, FILES, args.force)
     try:
         with warnings.catch_warnings(record=True) as caught:
@@ -336,7 +338,8 @@ def cmd_calibrate(args) -> None:
             library = tuple(BY_NAME[n] for n in names)
         log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
         res = calibrate(data, robot, validate=val, library=library,
-                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust, log=log)
+                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust, log=log,
+                        workers=args.workers)
     except DataError as e:
         raise CLIError(str(e)) from None
     report = write_report(res, out, design=str(args.design), validate=args.validate)
@@ -419,6 +422,9 @@ def _add_calibrate_parser(sub) -> None:
     c.add_argument("--drop-bad", action="store_true",
                    help="drop isolated bad rows (listed in the report) instead of failing")
     c.add_argument("--force", action="store_true", help="replace an existing report in --out")
+    c.add_argument("--workers", type=int, default=None,
+                   help="processes running the loop's independent fits alongside this one (default: one per "
+                        "spare core, at most 4; 0: none); the report is the same with any")
     c.add_argument("--quiet", action="store_true", help="only the one-line summary")
     c.set_defaults(func=cmd_calibrate)
 

@@ -12,6 +12,10 @@ if "TENSION_ZONES_CACHE" not in os.environ:
     os.environ["TENSION_ZONES_CACHE"] = tempfile.mkdtemp(prefix="tz-test-jax-cache-")
     atexit.register(shutil.rmtree, os.environ["TENSION_ZONES_CACHE"], True)  # by the process that made it
 
+# the calibrations run on the test's process alone (calibration/_fits.py): the suite already keeps both
+# cores busy, and a worker compiles its own programs; one test runs a worker on purpose
+os.environ.setdefault("TENSION_ZONES_WORKERS", "0")
+
 # the tests are compile-bound (small inputs, thousands of programs): XLA:CPU's older emitters compile
 # them faster (the package's large programs use them already: tension_zones/_xla.py), the suite
 # 722.4 -> 599.9 s on 2 cores (same machine, an hour apart); subprocesses inherit the flag. The package's own default codegen is what

@@ -51,6 +51,7 @@ from ..model import Design, Robot
 from ._baselines import baselines
 from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
+from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel
 from ._problem import Problem, correlations, parameter_std, physical
 from .effects import library as default_library
@@ -64,7 +65,6 @@ EXCESS_RATIO = 1.15
 #: significant, each first gets a short refit (``SCREEN_ITERATIONS``) and the best of those that
 #: lowered the held-out error go on.
 TRIES_PER_ROUND = 4
-SCREEN_ITERATIONS = 6
 #: A candidate must explain ``min_excess`` of the held-out mean square's excess over the noise floor
 #: while the model is within this many noise floors of it, and a share falling as ``1 / ratio``
 #: beyond: far above the noise the excess is the sum of many missing effects, and one real effect
@@ -165,12 +165,6 @@ def final_parameters(pb: Problem, theta, active) -> dict:
     return {"physical": phys, "fitted": pb.describe(theta, active)}
 
 
-def rmse(r) -> float:
-    """Tip-position RMSE (mm) of residuals (M, 3): ``sqrt(mean |r|^2)``."""
-    r = np.asarray(r)
-    return float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if len(r) else float("nan")
-
-
 def rmse_aligned(r) -> float:
     """RMSE after removing the mean offset (the metric the OpenCR lab reports)."""
     r = np.asarray(r)
@@ -179,14 +173,18 @@ def rmse_aligned(r) -> float:
 
 def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None, library=None, nominal=None,
               holdout: float = 0.25, robust: bool = False, alpha: float = 1e-3, min_gain: float = 0.01,
-              min_excess: float = 0.25, max_rounds: int | None = None, log=None) -> Result:
+              min_excess: float = 0.25, max_rounds: int | None = None, log=None,
+              workers: int | None = None) -> Result:
     """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
 
     ``validate``: a second recording of the same robot, only predicted after the selection.
     ``library`` / ``nominal``: candidate and always-fitted effects (defaults by the data's frame,
-    :func:`.effects.library`). ``log`` (callable taking a str) reports progress.
+    :func:`.effects.library`). ``log`` (callable taking a str) reports progress. ``workers``: processes
+    that run the loop's independent fits alongside this one (:mod:`._fits`; None: one per spare core
+    where starting them is safe, ``TENSION_ZONES_WORKERS`` if set); the result is the same with any.
     """
     t0 = time.perf_counter()
+    n_workers = worker_count(workers)
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
     library = default_library(data.frame) if library is None else tuple(library)
@@ -202,7 +200,6 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     train = np.r_[train, np.zeros(full.n_samples - n_fit, bool)]
     held = np.r_[held, np.zeros(full.n_samples - n_fit, bool)]
     pb = Problem(model, robot, full, tuple(nominal) + tuple(library))
-    w_train = train.astype(float)
     cand_names = [b.name for b in library]
     nominal_names = [b.name for b in nominal]
     sl = pb.spec.slices()
@@ -215,233 +212,214 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         noise = None
     sigma = None if noise is None else np.asarray(noise["sigma_mm"])
 
-    def fit(theta0, active, weights=w_train):
-        if not robust:
-            return pb.fit(theta0, active, weights)
-        th, mask = theta0, weights > 0
-        for _ in range(2):  # the Huber threshold follows the residual's scale (3.5 noise sigmas at least)
-            r = pb.residuals(th, active)[mask]
-            scale = np.median(np.linalg.norm(r, axis=1)) / 1.54  # median of a 3-D chi is 1.54 sigma
-            c = max(2.5 * scale, 3.5 * (float(np.mean(sigma)) if sigma is not None else scale))
-            th = pb.fit(th, active, weights, huber_c=c)
-        return th
+    fits = Fits(pb, train, held, robust)
+    fits.sigma = sigma
+    fit, held_error, decision_error = fits.fit, fits.held_error, fits.decision_error
+    # the workers compile the rod's program first (the main process needs it last), then the model's,
+    # then the final refit's
+    rod = [b.name for b in library if getattr(b, "pieces", 1) > 1]
+    warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
+    warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
+    with Runner(fits, n_workers,
+                (model, robot, full, tuple(nominal) + tuple(library)), warm) as run:
+        active = list(nominal_names)
+        theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
+        theta_before = theta.copy()
+        r_decl = pb.residuals(theta_decl, [])  # after the first fit: in its program (Problem._evaluate)
+        if noise is None:
+            noise = noise_floor(data, pb.residuals(theta, active)[:n_fit])
+            sigma = np.asarray(noise["sigma_mm"])
+        sigma = np.maximum(sigma, 1e-9)
+        fits.sigma = sigma
+        rmse_before, err, r = held_error(theta, active)
+        plain = rmse_before  # the current model's held-out RMSE (err: the one decisions use)
+        say(f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
+            f"noise floor {noise['floor_mm']:.4f} mm")
+        effects, candidates, rounds = [], [], []
+        models = [(list(active), theta.copy())]  # every accepted model, for the validation steps
+        rnd = 0
+        max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
+        while rnd < max_rounds:
+            rnd += 1
+            remaining = [n for n in cand_names if n not in active]
+            # an effect with no sensitivity without a load is not scored while the model has none (its
+            # score would be 0; for the variable curvature this also spares the rod's program)
+            blocks = {b.name: b for b in pb.spec.blocks}
+            unloaded = not pb.loaded(theta, active)
+            idle = [n for n in remaining if getattr(blocks[n], "needs_load", False) and unloaded]
+            remaining = [n for n in remaining if n not in idle]
+            if not remaining:
+                break
+            # effects that switch the solver are scored with their solver on (at null: the same model)
+            switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
+            r = pb.residuals(theta, active)
+            if switched:
+                run.warmed("rod")  # a worker compiling the rod's program: load it rather than compile it
+            # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
+            r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(held))
+            active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
+            wts = glitch_weights(r_held, sigma) if robust else None
+            # the score test's null is "what is left is noise"; far above the noise floor, what is left is
+            # mostly model error, and a candidate must explain more of it than its parameter count would by
+            # chance: the residual's own per-axis scale replaces the noise's there
+            kept_h = r_held if wts is None else r_held[wts > 0]
+            sigma_score = np.maximum(sigma, np.sqrt(np.mean(kept_h**2, axis=0)))
+            scores = []
+            for name in remaining:
+                s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
+                scores.append({"round": rnd, "name": name, "score": s["score"], "dof": s["dof"],
+                               "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0))})
+            scores.sort(key=lambda d: -d["score"])
+            scores += [{"round": rnd, "name": n, "score": 0.0, "dof": int(sl[n].stop - sl[n].start),
+                        "explained_rmse_mm": 0.0, "not_scored": "the model has no load"} for n in idle]
+            candidates.extend(scores)
+            z_crit = _norm_isf(alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
+            say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
+            tried = []
+            m, m_train = int(held.sum()), int(train.sum())
+            plain_start = plain
+            significant = [s for s in scores if s["score"] > z_crit]
+            # held-out SSE drops are in units of the per-axis variance of the current residual (at least
+            # the noise): structure the model lacks must not make a chance improvement look significant
+            unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+            if len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
+                    getattr(blocks[s["name"]], "pieces", 1) > 1 for s in significant)):
+                # screen: a short refit of every significant candidate, then the full refits of the best
+                # (also where fewer are significant but one of them is the rod's, whose full refit costs
+                # as much as several of the others')
+                jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in significant]
+                for s, e in zip(significant, run.map("screen", jobs, [pb.cost(a) for _, a in jobs])):
+                    s["screened_rmse_mm"] = e
+                say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
+                # a candidate whose short refit does not lower the held-out error by a quarter of the drop
+                # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
+                # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
+                # refits (three of them the rod's, 35-50 s each), each of which failed its test where an
+                # earlier version ran it; every candidate screened out there had a higher held-out error
+                # after its short refit than before
+                for s in significant:
+                    s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
+                    s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
+                    s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
+                significant = sorted((s for s in significant if not s["screened_out"]),
+                                     key=lambda s: s["screened_rmse_mm"])
+            chosen = significant[:TRIES_PER_ROUND]
+            jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in chosen]
+            for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs, [pb.cost(a) for _, a in jobs])):
+                drop = (err**2 - err_new**2) * m / unit
+                need = chi2_quantile(alpha, max(s["dof"], 1))
+                # the training part's gain, tested the same way: not a share of the held-out gain, since the
+                # parts' mixes of motions differ (on FTDCR v4 the single-tendon pulls are a third of the
+                # training excess and a sixth of the held-out one, and no effect but the preload moves them)
+                tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
+                drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
+                share, share_train = _shares(err, err_new, tr0, tr1, noise["floor_mm"])
+                ok = (drop > need and err_new < (1.0 - min_gain) * err
+                      and share >= min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
+                      and drop_train > need)
+                tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
+                              "share_held_out": share, "share_train": share_train, "sse_drop": drop,
+                              "sse_drop_train": drop_train,
+                              "needed": need, "significant": bool(ok), "theta": th_new, "err": err_new,
+                              "score": s["score"]})
+                say(f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
+                    f"{' significant' if ok else ''}")
+            good = [t for t in tried if t["significant"]]
+            accepted = min(good, key=lambda t: t["err"]) if good else None
+            if accepted is not None:
+                theta, err, plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
+                active.append(accepted["name"])
+                effects.append({"name": accepted["name"], "rmse_after_mm": accepted["rmse_held_out_mm"],
+                                "score": accepted["score"]})
+                say(f"  kept {accepted['name']}")
+            for t in tried:
+                t.pop("theta"), t.pop("err"), t.pop("score")
+                t["accepted"] = accepted is not None and t["name"] == accepted["name"]
+            accepted = None if accepted is None else accepted["name"]
+            removed = []
+            if accepted is not None:
+                # backward step: an earlier effect that only stood in for the one just added goes
+                # (the refits without each earlier effect run at once; the first that passes is taken)
+                earlier = [e for e in effects if e["name"] != accepted]
+                jobs = [(_without(pb, theta, sl[e["name"]]), [a for a in active if a != e["name"]]) for e in earlier]
+                for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, run.map("refit_held_only", jobs)):
+                    unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
+                    rise = (err_wo**2 - err**2) * m / unit
+                    need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
+                    say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
+                    if rise < need:
+                        theta, err, plain, active = th_wo, err_wo, plain_wo, rest
+                        effects = [x for x in effects if x["name"] != e["name"]]
+                        removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
+                                        "needed": need})
+                        say(f"  removed {e['name']}")
+                        break
+                models.append((list(active), theta.copy()))
+            rounds.append({"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": plain_start,
+                           "rmse_train_mm": rmse(r[train]), "tried": tried, "accepted": accepted, "removed": removed})
+            if accepted is None:
+                break
 
-    def decision_error(r, mask):
-        """The RMSE used for decisions: robust mode leaves tracker glitches out."""
-        if not robust:
-            return rmse(r[mask])
-        return rmse(r[mask][_glitch_weights(r[mask], sigma) > 0])
-
-    def held_error(theta, active):
-        """(plain RMSE, the error used for decisions, residuals) on the held-out part."""
-        r = pb.residuals(theta, active)
-        return rmse(r[held]), decision_error(r, held), r
-
-    held_idx = np.flatnonzero(held)
-
-    def held_only(theta, active):
-        """(plain RMSE, the error used for decisions) on the held-out part, evaluating only its samples
-        (a short refit's or a removal's verdict needs no others)."""
-        rh = pb.residuals(theta, active, samples=held_idx)
-        return rmse(rh), decision_error(rh, np.ones(len(rh), bool))
-
-    active = list(nominal_names)
-    theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
-    theta_before = theta.copy()
-    r_decl = pb.residuals(theta_decl, [])  # after the first fit: in its program (Problem._evaluate)
-    if noise is None:
-        noise = noise_floor(data, pb.residuals(theta, active)[:n_fit])
-        sigma = np.asarray(noise["sigma_mm"])
-    sigma = np.maximum(sigma, 1e-9)
-    rmse_before, err, r = held_error(theta, active)
-    plain = rmse_before  # the current model's held-out RMSE (err: the one decisions use)
-    say(f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
-        f"noise floor {noise['floor_mm']:.4f} mm")
-    effects, candidates, rounds = [], [], []
-    models = [(list(active), theta.copy())]  # every accepted model, for the validation steps
-    rnd = 0
-    max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
-    while rnd < max_rounds:
-        rnd += 1
-        remaining = [n for n in cand_names if n not in active]
-        # an effect with no sensitivity without a load is not scored while the model has none (its
-        # score would be 0; for the variable curvature this also spares the rod's program)
-        blocks = {b.name: b for b in pb.spec.blocks}
-        unloaded = not pb.loaded(theta, active)
-        idle = [n for n in remaining if getattr(blocks[n], "needs_load", False) and unloaded]
-        remaining = [n for n in remaining if n not in idle]
-        if not remaining:
-            break
-        # effects that switch the solver are scored with their solver on (at null: the same model)
-        switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
-        r = pb.residuals(theta, active)
-        # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
-        r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(held))
-        active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
-        wts = _glitch_weights(r_held, sigma) if robust else None
-        # the score test's null is "what is left is noise"; far above the noise floor, what is left is
-        # mostly model error, and a candidate must explain more of it than its parameter count would by
-        # chance: the residual's own per-axis scale replaces the noise's there
-        kept_h = r_held if wts is None else r_held[wts > 0]
-        sigma_score = np.maximum(sigma, np.sqrt(np.mean(kept_h**2, axis=0)))
-        scores = []
-        for name in remaining:
-            s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
-            scores.append({"round": rnd, "name": name, "score": s["score"], "dof": s["dof"],
-                           "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0))})
-        scores.sort(key=lambda d: -d["score"])
-        scores += [{"round": rnd, "name": n, "score": 0.0, "dof": int(sl[n].stop - sl[n].start),
-                    "explained_rmse_mm": 0.0, "not_scored": "the model has no load"} for n in idle]
-        candidates.extend(scores)
-        z_crit = _norm_isf(alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
-        say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
-        tried = []
-        m, m_train = int(held.sum()), int(train.sum())
-        plain_start = plain
-        significant = [s for s in scores if s["score"] > z_crit]
-        # held-out SSE drops are in units of the per-axis variance of the current residual (at least
-        # the noise): structure the model lacks must not make a chance improvement look significant
-        unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
-        if len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
-                getattr(blocks[s["name"]], "pieces", 1) > 1 for s in significant)):
-            # screen: a short refit of every significant candidate, then the full refits of the best
-            # (also where fewer are significant but one of them is the rod's, whose full refit costs
-            # as much as several of the others')
-            for s in significant:
-                th0 = theta.copy()
-                th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
-                s["screened_rmse_mm"] = held_only(pb.fit(th0, active + [s["name"]], w_train,
-                                                         max_iter=SCREEN_ITERATIONS), active + [s["name"]])[1]
-            say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
-            # a candidate whose short refit does not lower the held-out error by a quarter of the drop
-            # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
-            # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
-            # refits (three of them the rod's, 35-50 s each), each of which failed its test where an
-            # earlier version ran it; every candidate screened out there had a higher held-out error
-            # after its short refit than before
-            for s in significant:
-                s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
-                s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
-                s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
-            significant = sorted((s for s in significant if not s["screened_out"]),
-                                 key=lambda s: s["screened_rmse_mm"])
-        for s in significant[:TRIES_PER_ROUND]:
-            th0 = theta.copy()
-            th0[sl[s["name"]]] = pb.null[sl[s["name"]]]
-            th_new = fit(th0, active + [s["name"]])
-            plain_new, err_new, r_new = held_error(th_new, active + [s["name"]])
-            drop = (err**2 - err_new**2) * m / unit
-            need = chi2_quantile(alpha, max(s["dof"], 1))
-            # the training part's gain, tested the same way: not a share of the held-out gain, since the
-            # parts' mixes of motions differ (on FTDCR v4 the single-tendon pulls are a third of the
-            # training excess and a sixth of the held-out one, and no effect but the preload moves them)
-            tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
-            drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
-            share, share_train = _shares(err, err_new, tr0, tr1, noise["floor_mm"])
-            ok = (drop > need and err_new < (1.0 - min_gain) * err
-                  and share >= min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
-                  and drop_train > need)
-            tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
-                          "share_held_out": share, "share_train": share_train, "sse_drop": drop,
-                          "sse_drop_train": drop_train,
-                          "needed": need, "significant": bool(ok), "theta": th_new, "err": err_new,
-                          "score": s["score"]})
-            say(f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
-                f"{' significant' if ok else ''}")
-        good = [t for t in tried if t["significant"]]
-        accepted = min(good, key=lambda t: t["err"]) if good else None
-        if accepted is not None:
-            theta, err, plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
-            active.append(accepted["name"])
-            effects.append({"name": accepted["name"], "rmse_after_mm": accepted["rmse_held_out_mm"],
-                            "score": accepted["score"]})
-            say(f"  kept {accepted['name']}")
-        for t in tried:
-            t.pop("theta"), t.pop("err"), t.pop("score")
-            t["accepted"] = accepted is not None and t["name"] == accepted["name"]
-        accepted = None if accepted is None else accepted["name"]
-        removed = []
-        if accepted is not None:
-            # backward step: an earlier effect that only stood in for the one just added goes
-            for e in [e for e in effects if e["name"] != accepted]:
-                th0 = theta.copy()
-                th0[sl[e["name"]]] = pb.null[sl[e["name"]]]
-                rest = [a for a in active if a != e["name"]]
-                th_wo = fit(th0, rest)
-                plain_wo, err_wo = held_only(th_wo, rest)
-                unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
-                rise = (err_wo**2 - err**2) * m / unit
-                need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
-                say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
-                if rise < need:
-                    theta, err, plain, active = th_wo, err_wo, plain_wo, rest
-                    effects = [x for x in effects if x["name"] != e["name"]]
-                    removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
-                                    "needed": need})
-                    say(f"  removed {e['name']}")
-                    break
-            models.append((list(active), theta.copy()))
-        rounds.append({"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": plain_start,
-                       "rmse_train_mm": rmse(r[train]), "tried": tried, "accepted": accepted, "removed": removed})
-        if accepted is None:
-            break
-
-    # the selection is over: the structure left, on the held-out residual of the model fitted
-    # without those samples
-    plain_after, err_after, r_after = held_error(theta, active)
-    feats = features(full, _base_frame_prediction(pb, theta_before, active[: len(nominal_names)]))
-    held_feats = {k: v[held] for k, v in feats.items()}
-    structure = structure_test(r_after[held], held_feats, sigma)
-    # the final model: refitted on every sample of the data file (step 5 above); its effects'
-    # parameters (later effects refit earlier ones), deviations, identifiability
-    w_all = (train | held).astype(float)
-    theta_sel, theta = theta, fit(theta, active, w_all)
-    r_final, J_final = pb.jacobian(theta, active)
-    free = pb.mask(active)
-    std = parameter_std(J_final, r_final, free, w_all)
-    for e in effects:
-        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
-        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
-    corr = correlations(J_final, free, w_all, pb.labels(active))
-    # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
-    # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
-    log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
-    sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
-    excess = {"ratio_to_floor": plain_after / noise["floor_mm"], "z": log_ratio / sd}
-    structure["excess_over_noise"] = excess
-    unexplained = bool(
-        any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
-        or (excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z)
-    )
-    rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
-              "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}
-    steps = []
-    families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
-    for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
-        last = i == len(models) - 1  # the selected model: its residuals are r_after, its refit r_final
-        rr = r_after if last else pb.residuals(th, act)
-        # the validation file by the model refitted on every sample, as the final one (the last is it)
-        rv = rr if not val.any() else r_final if last else pb.residuals(fit(th, act, w_all), act)
-        step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
-                "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
-                "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None}
-        if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
-            step["rmse_by_family_mm"] = {
-                part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
-                for part, mask, r in (("held_out", held, rr), ("validate", val, rv)) if mask.any()}
-        steps.append(step)
-    bl = None
-    if val.any():
-        rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
-        bl = baselines(full, train, held, val)
-        say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
-    return Result(problem=pb, train=train, held=held, val=val, holdout=data.split_description(holdout),
-                  noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_selected=theta_sel,
-                  theta_after=theta,
-                  std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
-                  rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
-                  robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
-                  baselines=bl, seconds=time.perf_counter() - t0)
+        # the selection is over: the structure left, on the held-out residual of the model fitted
+        # without those samples
+        plain_after, err_after, r_after = held_error(theta, active)
+        feats = features(full, _base_frame_prediction(pb, theta_before, active[: len(nominal_names)]))
+        held_feats = {k: v[held] for k, v in feats.items()}
+        structure = structure_test(r_after[held], held_feats, sigma)
+        # the final model: refitted on every sample of the data file (step 5 above); its effects'
+        # parameters (later effects refit earlier ones), deviations, identifiability
+        w_all = fits.w_all
+        # (with the refits of the validation steps' models, below, at once)
+        jobs = [(theta, active, False)] + [(th, act, True) for act, th in models[:-1]] * bool(val.any())
+        run.warmed("final")
+        done = run.map("refit_all", jobs, [pb.cost(a) for _, a, _ in jobs])
+        theta_sel, theta = theta, done[0][0]
+        r_final, J_final = pb.jacobian(theta, active)
+        free = pb.mask(active)
+        std = parameter_std(J_final, r_final, free, w_all)
+        for e in effects:
+            e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
+            e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
+        corr = correlations(J_final, free, w_all, pb.labels(active))
+        # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
+        # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
+        log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
+        sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
+        excess = {"ratio_to_floor": plain_after / noise["floor_mm"], "z": log_ratio / sd}
+        structure["excess_over_noise"] = excess
+        unexplained = bool(
+            any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
+            or (excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z)
+        )
+        rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
+                  "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}
+        steps = []
+        families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
+        for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
+            last = i == len(models) - 1  # the selected model: its residuals are r_after, its refit r_final
+            rr = r_after if last else pb.residuals(th, act)
+            # the validation file by the model refitted on every sample, as the final one (the last is it)
+            rv = rr if not val.any() else r_final if last else done[1 + i][1]
+            step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
+                    "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
+                    "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None}
+            if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
+                step["rmse_by_family_mm"] = {
+                    part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
+                    for part, mask, r in (("held_out", held, rr), ("validate", val, rv)) if mask.any()}
+            steps.append(step)
+        bl = None
+        if val.any():
+            rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
+            bl = baselines(full, train, held, val)
+            say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
+        return Result(problem=pb, train=train, held=held, val=val, holdout=data.split_description(holdout),
+                      noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_selected=theta_sel,
+                      theta_after=theta,
+                      std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
+                      rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
+                      robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
+                      baselines=bl, seconds=time.perf_counter() - t0)
 
 
 def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
@@ -452,6 +430,13 @@ def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
         return (a**2 - b**2) / excess if excess > 0 else 0.0
 
     return share(held0, held1), share(train0, train1)
+
+
+def _without(pb: Problem, theta, block: slice) -> np.ndarray:
+    """A copy of ``theta`` with one block's parameters at their null values (a refit's start)."""
+    th = np.array(theta, float)
+    th[block] = pb.null[block]
+    return th
 
 
 def _initial(pb: Problem, data: Dataset, theta, nominal) -> np.ndarray:
@@ -493,16 +478,6 @@ def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
         if name in sl:
             th[sl[name]] = pb.null[sl[name]]
     return pb.predict(th, [a for a in active if a not in frame])
-
-
-#: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.
-GLITCH_C = 8.0
-
-
-def _glitch_weights(r, sigma):
-    n = np.linalg.norm(r, axis=1)
-    c = max(GLITCH_C * float(np.mean(sigma)), 5.0 * float(np.median(n)))
-    return np.where(n <= c, 1.0, 0.0)
 
 
 def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:

@@ -208,6 +208,11 @@ class Problem:
             self._specs[pieces] = dataclasses.replace(self.spec, model=self.model.with_pieces(pieces))
         return self._specs[pieces]
 
+    def cost(self, active) -> float:
+        """The relative cost of a fit of the model made of ``active``: its segments' pieces (the rod's
+        program costs several times the constant-curvature one's)."""
+        return float(getattr(getattr(self.spec_for(active).model, "structure", None), "pieces", 1))
+
     def loaded(self, theta, active) -> bool:
         """Whether the model made of ``active`` at ``theta`` carries a load (the model's ``loaded``;
         True for a model that does not say)."""

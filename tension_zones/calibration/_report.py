@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._loop import EXCESS_RATIO, SCREEN_ITERATIONS, STRUCTURE_Z, Result
+from ._fits import SCREEN_ITERATIONS
+from ._loop import EXCESS_RATIO, STRUCTURE_Z, Result
 
 PLOTS = {
     "bending_direction": "residual_vs_bending_direction.png",

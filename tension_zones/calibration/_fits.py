@@ -1,0 +1,253 @@
+"""The loop's fits and held-out errors, run on the main process and on worker processes.
+
+The fits within one round of the loop (:mod:`._loop`) are independent of each other: the candidates'
+short refits, their full refits, the backward step's refits without each earlier effect, and at the
+end the refits of every accepted model on all samples. :class:`Fits` is what one such fit does (the
+same code wherever it runs); :class:`Runner` runs a list of them on the main process and on worker
+processes.
+
+**Why processes.** XLA:CPU runs one call of the calibration engine on about one core (an FTDCR v4 fit
+keeps one process at 105-110 % CPU of this machine's 200 %), so a second core idles through the loop.
+Threads cannot use it: two Python threads executing the engine at once deadlocked
+(``benchmarks/README.md``). Each worker is a process with its own copy of the :class:`Problem` (model,
+robot, data and blocks, pickled once at the start) and its own compiled programs. The main process
+hands the list's fits to the workers from the front and takes them itself from the back (the ones no
+worker has started), so no core idles while a worker compiles or a fit is long. Results are bit for
+bit the ones of a run without workers: the same program on the same inputs, and the loop's decisions
+look at the list's results in the list's order.
+
+**Warm-up.** A worker's first job is to compile the programs the loop may need: the rod's (the
+variable-curvature effect's, ``Effect.pieces``) first, then the constant-curvature one (which the main
+process compiles meanwhile: with the cache on, the worker loads it), then the final refit's on every
+sample (where the loop's fits run on their own rows, :meth:`Problem._fit_rows`). With the compilation
+cache on (``tension_zones._xla``), the main process waits for that job before it first runs the rod
+or the final refit, and loads the worker's programs instead of compiling its own (on this 2-core
+machine a compile takes 10-15 s).
+
+**Where workers are started.** Python's ``spawn`` starts a worker by importing the calling program's
+main module again: a script whose top level calls :func:`calibrate` without an
+``if __name__ == "__main__":`` guard would run again in every worker. So by default (``workers=None``)
+workers are used only where that cannot happen: an interactive session or notebook, ``python -c``,
+``python -m``, the ``tension-zones`` command. ``TENSION_ZONES_WORKERS`` (a count) overrides the
+default; a script with the guard passes ``workers=`` itself.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import sys
+
+import numpy as np
+
+#: Worker processes by default: one per core beyond the first, at most this many (a round has 4-10
+#: independent fits, and each worker holds its own programs: ~0.7 GB for the FTDCR v4 robot).
+MAX_WORKERS = 4
+#: The loop's short refits, in Levenberg-Marquardt passes.
+SCREEN_ITERATIONS = 6
+#: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.
+GLITCH_C = 8.0
+
+
+def rmse(r) -> float:
+    """Tip-position RMSE (mm) of residuals (M, 3): ``sqrt(mean |r|^2)``."""
+    r = np.asarray(r)
+    return float(np.sqrt(np.mean(np.sum(r**2, axis=1)))) if len(r) else float("nan")
+
+
+def glitch_weights(r, sigma) -> np.ndarray:
+    """0 for the rows (M, 3) of ``r`` that robust mode takes for tracker glitches, 1 for the others."""
+    n = np.linalg.norm(r, axis=1)
+    c = max(GLITCH_C * float(np.mean(sigma)), 5.0 * float(np.median(n)))
+    return np.where(n <= c, 1.0, 0.0)
+
+
+class Fits:
+    """The fits of one calibration: a :class:`Problem`, its training and held-out samples (boolean
+    (N,) masks over the problem's samples) and the loss (least squares, or ``robust``: a Huber loss
+    whose threshold follows the residual's scale, and held-out errors without glitches). ``sigma``
+    (3,), the noise per axis in mm, is set by the loop once it is known."""
+
+    def __init__(self, pb, train, held, robust: bool = False):
+        self.pb, self.train, self.held, self.robust = pb, np.asarray(train), np.asarray(held), robust
+        self.w_train = self.train.astype(float)
+        self.w_all = (self.train | self.held).astype(float)
+        self.held_idx = np.flatnonzero(self.held)
+        self.sigma = None
+
+    def fit(self, theta0, active, weights=None, max_iter: int = 40) -> np.ndarray:
+        """The blocks ``active`` fitted from ``theta0`` (P,) on ``weights`` (default: the training part)."""
+        pb, weights = self.pb, self.w_train if weights is None else weights
+        if not self.robust:
+            return pb.fit(theta0, active, weights, max_iter=max_iter)
+        th, mask = theta0, weights > 0
+        for _ in range(2):  # the Huber threshold follows the residual's scale (3.5 noise sigmas at least)
+            r = pb.residuals(th, active)[mask]
+            scale = np.median(np.linalg.norm(r, axis=1)) / 1.54  # median of a 3-D chi is 1.54 sigma
+            c = max(2.5 * scale, 3.5 * (float(np.mean(self.sigma)) if self.sigma is not None else scale))
+            th = pb.fit(th, active, weights, huber_c=c, max_iter=max_iter)
+        return th
+
+    def decision_error(self, r, mask) -> float:
+        """The RMSE used for decisions: robust mode leaves tracker glitches out."""
+        if not self.robust:
+            return rmse(r[mask])
+        return rmse(r[mask][glitch_weights(r[mask], self.sigma) > 0])
+
+    def held_error(self, theta, active):
+        """(plain RMSE, the error used for decisions, residuals (N, 3)) on the held-out part."""
+        r = self.pb.residuals(theta, active)
+        return rmse(r[self.held]), self.decision_error(r, self.held), r
+
+    def held_only(self, theta, active):
+        """(plain RMSE, the error used for decisions) on the held-out part, evaluating only its samples
+        (a short refit's or a removal's verdict needs no others)."""
+        rh = self.pb.residuals(theta, active, samples=self.held_idx)
+        return rmse(rh), self.decision_error(rh, np.ones(len(rh), bool))
+
+    # -- the loop's jobs: each a fit and what the loop needs of it -----------------------------------
+
+    def screen(self, theta0, active):
+        """A short refit (``SCREEN_ITERATIONS`` passes, least squares) and its held-out error."""
+        th = self.pb.fit(theta0, active, self.w_train, max_iter=SCREEN_ITERATIONS)
+        return self.held_only(th, active)[1]
+
+    def refit(self, theta0, active):
+        """A full refit on the training part: (theta, plain held-out RMSE, decision error, residuals)."""
+        th = self.fit(theta0, active)
+        return (th, *self.held_error(th, active))
+
+    def refit_held_only(self, theta0, active):
+        """A full refit on the training part: (theta, plain held-out RMSE, decision error)."""
+        th = self.fit(theta0, active)
+        return (th, *self.held_only(th, active))
+
+    def refit_all(self, theta0, active, residuals: bool = True):
+        """A refit on every sample of the data file: (theta, residuals (N, 3) or None)."""
+        th = self.fit(theta0, active, self.w_all)
+        return th, (self.pb.residuals(th, active) if residuals else None)
+
+    def warm(self, active, part: str) -> None:
+        """Compile (or load) the program of the model made of the blocks ``active`` fitted on the
+        training part (``part = "train"``) or on every sample (``"all"``), with the shape the loop's fits
+        will have (a process's first fit fixes the shape of its later evaluations, as the loop's first
+        fit does: the first must be a ``"train"`` one)."""
+        self.pb.fit(self.pb.null, active, self.w_train if part == "train" else self.w_all, max_iter=0)
+
+
+# -- worker processes ---------------------------------------------------------------------------------
+
+_WORKER: Fits | None = None
+
+
+def _start(problem_args, train, held, robust) -> None:
+    """A worker's initializer: its own :class:`Problem` and :class:`Fits`."""
+    global _WORKER
+    from ._problem import Problem
+
+    _WORKER = Fits(Problem(*problem_args), train, held, robust)
+
+
+def _job(method, sigma, args):
+    _WORKER.sigma = sigma
+    return getattr(_WORKER, method)(*args)
+
+
+def worker_count(workers=None) -> int:
+    """The number of worker processes: ``workers`` (checked), or for None ``TENSION_ZONES_WORKERS`` if
+    set, else one per core beyond the first (at most ``MAX_WORKERS``) where starting them is safe (see
+    the module), else 0."""
+    if workers is not None:
+        if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
+            raise ValueError(f"workers must be a whole number, 0 or more, got {workers!r}")
+        return int(workers)
+    env = os.environ.get("TENSION_ZONES_WORKERS", "").strip()
+    if env:
+        if not env.isdigit():
+            raise ValueError(f"TENSION_ZONES_WORKERS must be a whole number, 0 or more, got {env!r}")
+        return int(env)
+    main = sys.modules.get("__main__")
+    script = getattr(main, "__file__", None) is not None and getattr(main, "__spec__", None) is None
+    if script and os.path.basename(sys.argv[0] or "") != "tension-zones":
+        return 0  # a plain script: spawn would run its top level again in every worker
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # (not Linux)
+        cores = os.cpu_count() or 1
+    return max(0, min(cores - 1, MAX_WORKERS))
+
+
+class Runner:
+    """Runs :class:`Fits` jobs for the loop: on the main process's ``fits`` alone (``workers = 0``),
+    or there and on ``workers`` processes, each holding the problem ``problem_args`` (the
+    :class:`Problem` constructor's arguments). ``warm``: ``{name: (active, part)}``, the programs a
+    worker compiles first, in this order (:meth:`Fits.warm`). Use as a context manager (the workers
+    end with it)."""
+
+    def __init__(self, fits: Fits, workers: int = 0, problem_args=None, warm=None):
+        self.fits, self.pool, self._warm = fits, None, {}
+        if workers > 0:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            self.pool = ProcessPoolExecutor(
+                workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start,
+                initargs=(problem_args, fits.train, fits.held, fits.robust))
+            self._warm = {k: self.pool.submit(_job, "warm", None, (list(a), part))
+                          for k, (a, part) in (warm or {}).items()}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self) -> None:
+        if self.pool is not None:
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            self.pool = None
+
+    def warmed(self, name: str) -> None:
+        """Before the main process first runs the program ``name`` of ``warm``: where a worker is
+        compiling it and the main process can load it (the compilation cache is on), wait for it; where
+        no worker has started it, the main process compiles its own (and no worker starts it now)."""
+        from .._xla import cache_dir
+
+        f = self._warm.pop(name, None)
+        if f is None or self.pool is None or cache_dir() is None or f.cancel():
+            return
+        with contextlib.suppress(Exception):  # a worker that failed: the main process compiles its own
+            f.result()
+
+    def map(self, method: str, jobs: list, cost=None) -> list:
+        """``getattr(fits, method)(*args)`` for every ``args`` in ``jobs``, results in their order.
+        ``cost`` (one number per job, e.g. the rod's 7 against the model's 1): the workers start with
+        the costliest, so that the longest job does not start last."""
+        if self.pool is None or len(jobs) < 2:
+            return [self._local(method, a) for a in jobs]
+        from concurrent.futures.process import BrokenProcessPool
+
+        order = sorted(range(len(jobs)), key=lambda i: -cost[i]) if cost is not None else list(range(len(jobs)))
+        try:
+            futures = {i: self.pool.submit(_job, method, self.fits.sigma, tuple(jobs[i])) for i in order}
+        except (BrokenProcessPool, RuntimeError):
+            self.close()
+            return [self._local(method, a) for a in jobs]
+        out, mine = [None] * len(jobs), set()
+        for i in reversed(order):  # the main process works from the back
+            if not futures[i].cancel():
+                break  # a worker has this one, and every one before it
+            out[i] = self._local(method, jobs[i])
+            mine.add(i)
+        for i in order:
+            if i in mine:
+                continue
+            try:
+                out[i] = futures[i].result()
+            except BrokenProcessPool:  # a worker died (killed, out of memory): the main process goes on
+                self.close()
+                out[i] = self._local(method, jobs[i])
+        return out
+
+    def _local(self, method, args):
+        return getattr(self.fits, method)(*args)
