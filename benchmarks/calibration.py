@@ -7,7 +7,10 @@ separate multi-segment stack). Every case runs ``tension-zones calibrate`` in a 
 lab engineer waits for: imports, compilation, fits, report), one case after the other, with
 ``JAX_LOG_COMPILES=1`` so that the number of XLA compilations is counted from the log. This code runs
 each case twice: with an empty compilation cache (a first run), then again with the cache the first run
-filled (every later run of the same robot; ``tension_zones/_xla.py``). The baseline has no cache. Cases:
+filled (every later run of the same robot; ``tension_zones/_xla.py``), and once more with that cache and
+no worker processes (``--workers 0``: the loop's fits on the one process, ``calibration/_fits.py``). The
+compilations counted include the workers' (their log goes to the same stream). The baseline has no
+cache. Cases:
 
 * FTDCR v4, ``train.csv`` with ``val.csv`` as the validation file (``--format opencr``);
 * a 500-sample single-segment set (the shipped ``synthetic/unknown_a_3w``).
@@ -92,11 +95,14 @@ def main(argv=None):
         with tempfile.TemporaryDirectory() as tmp:
             out = Path(args.keep) if args.keep and side == "this code" else Path(tmp)
             for name, cli in cases(out).items():
-                runs = (("none", None),) if side == "baseline" else (("empty", f"{tmp}/cache"), ("filled", f"{tmp}/cache"))
-                for cache_state, cache in runs:
-                    print(f"[{side}, cache {cache_state}] {name} ...", flush=True)
-                    r = run(root, cli + (["--force"] if cache_state == "filled" else []), cache)
-                    r.update(side=side, case=name, cache=cache_state, load=load())
+                c = f"{tmp}/cache"
+                runs = ((("none", None, None),) if side == "baseline" else
+                        (("empty", c, "default"), ("filled", c, "default"), ("filled", c, "0")))
+                for cache_state, cache, workers in runs:
+                    print(f"[{side}, cache {cache_state}, workers {workers}] {name} ...", flush=True)
+                    extra = (["--force"] if cache_state == "filled" else []) + (["--workers", "0"] if workers == "0" else [])
+                    r = run(root, cli + extra, cache)
+                    r.update(side=side, case=name, cache=cache_state, workers=workers, load=load())
                     print(json.dumps(r), flush=True)
                     res["rows"].append(r)
     if args.json:
@@ -112,10 +118,12 @@ def main(argv=None):
 def markdown(res) -> str:
     lines = [f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
              f"({res['load_at_start']}).", "",
-             "| case | code | compilation cache | seconds (in process) | wall seconds (fresh process) | XLA compilations |",
-             "|---|---|---|---:|---:|---:|"]
+             ("| case | code | compilation cache | worker processes | seconds (in process) | wall seconds (fresh "
+              "process) | XLA compilations |"),
+             "|---|---|---|---|---:|---:|---:|"]
     for r in res["rows"]:
-        lines.append(f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {r['seconds']:.1f} | "
+        workers = {"default": "default (1 here)", "0": "none", None: "-"}[r.get("workers")]
+        lines.append(f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {workers} | {r['seconds']:.1f} | "
                      f"{r['wall_seconds']:.1f} | {r['compilations']} |")
     return "\n".join(lines)
 
