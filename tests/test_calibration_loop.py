@@ -192,3 +192,28 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert "| declared design" in md and "registration" in md
     for png in rep["plots"]:
         assert (out / png).stat().st_size > 20_000
+
+
+def test_worker_count(monkeypatch):
+    """How many worker processes the loop starts (calibration/_fits.py): never where spawn would run a
+    plain script's top level again, nor for small problems; the environment variable is checked."""
+    import os
+    import sys
+
+    from tension_zones.calibration._fits import MAX_WORKERS, MIN_WORK, worker_count
+
+    monkeypatch.setenv("TENSION_ZONES_WORKERS", "2")
+    assert worker_count() == 2 and worker_count(0) == 0 and worker_count(3, work=1) == 3
+    monkeypatch.setenv("TENSION_ZONES_WORKERS", "two")
+    with pytest.raises(ValueError, match="TENSION_ZONES_WORKERS must be a whole number"):
+        worker_count()
+    monkeypatch.delenv("TENSION_ZONES_WORKERS")
+    main_module = sys.modules["__main__"]
+    monkeypatch.setattr(main_module, "__file__", "/somewhere/script.py", raising=False)
+    monkeypatch.setattr(main_module, "__spec__", None, raising=False)
+    monkeypatch.setattr(sys, "argv", ["/somewhere/script.py"])
+    assert worker_count(None, 10 * MIN_WORK) == 0  # a plain script
+    monkeypatch.delattr(main_module, "__file__")  # interactive, a notebook, python -c
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    assert worker_count(None, 10 * MIN_WORK) == max(0, min(cores - 1, MAX_WORKERS))
+    assert worker_count(None, MIN_WORK - 1) == 0  # too small to win a worker's start back

@@ -28,8 +28,9 @@ machine a compile takes 10-15 s).
 main module again: a script whose top level calls :func:`calibrate` without an
 ``if __name__ == "__main__":`` guard would run again in every worker. So by default (``workers=None``)
 workers are used only where that cannot happen: an interactive session or notebook, ``python -c``,
-``python -m``, the ``tension-zones`` command. ``TENSION_ZONES_WORKERS`` (a count) overrides the
-default; a script with the guard passes ``workers=`` itself.
+``python -m``, the ``tension-zones`` command; and only for problems large enough to win back a
+worker's start (``MIN_WORK``). ``TENSION_ZONES_WORKERS`` (a count) overrides the default; a script
+with the guard passes ``workers=`` itself.
 """
 
 from __future__ import annotations
@@ -43,6 +44,12 @@ import numpy as np
 #: Worker processes by default: one per core beyond the first, at most this many (a round has 4-10
 #: independent fits, and each worker holds its own programs: ~0.7 GB for the FTDCR v4 robot).
 MAX_WORKERS = 4
+#: ... for problems of at least this many samples x segments: a worker costs a process start and
+#: loading its programs (~5 s of a core), which a small problem's fits do not win back. Measured on
+#: this 2-core machine, compilation cache filled, one run after the other: FTDCR v4 (2063 samples x 3
+#: segments) 317.2 s without a worker, 229.9 s with one; the 500-sample single-segment set 12.3 s
+#: without, 14.8 s with (benchmarks/README.md).
+MIN_WORK = 1024
 #: The loop's short refits, in Levenberg-Marquardt passes.
 SCREEN_ITERATIONS = 6
 #: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.
@@ -153,10 +160,11 @@ def _job(method, sigma, args):
     return getattr(_WORKER, method)(*args)
 
 
-def worker_count(workers=None) -> int:
+def worker_count(workers=None, work: int | None = None) -> int:
     """The number of worker processes: ``workers`` (checked), or for None ``TENSION_ZONES_WORKERS`` if
     set, else one per core beyond the first (at most ``MAX_WORKERS``) where starting them is safe (see
-    the module), else 0."""
+    the module) and the problem is large enough (``work``, its samples x segments, at least
+    ``MIN_WORK``), else 0."""
     if workers is not None:
         if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
             raise ValueError(f"workers must be a whole number, 0 or more, got {workers!r}")
@@ -166,6 +174,8 @@ def worker_count(workers=None) -> int:
         if not env.isdigit():
             raise ValueError(f"TENSION_ZONES_WORKERS must be a whole number, 0 or more, got {env!r}")
         return int(env)
+    if work is not None and work < MIN_WORK:
+        return 0
     main = sys.modules.get("__main__")
     script = getattr(main, "__file__", None) is not None and getattr(main, "__spec__", None) is None
     if script and os.path.basename(sys.argv[0] or "") != "tension-zones":
@@ -221,8 +231,9 @@ class Runner:
 
     def map(self, method: str, jobs: list, cost=None) -> list:
         """``getattr(fits, method)(*args)`` for every ``args`` in ``jobs``, results in their order.
-        ``cost`` (one number per job, e.g. the rod's 7 against the model's 1): the workers start with
-        the costliest, so that the longest job does not start last."""
+        ``cost`` (one number per job, :meth:`Problem.cost`: the rod's fits cost several of the
+        constant-curvature model's): the workers start with the costliest, so that the longest job
+        does not start last."""
         if self.pool is None or len(jobs) < 2:
             return [self._local(method, a) for a in jobs]
         from concurrent.futures.process import BrokenProcessPool

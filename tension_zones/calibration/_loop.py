@@ -184,9 +184,10 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     where starting them is safe, ``TENSION_ZONES_WORKERS`` if set); the result is the same with any.
     """
     t0 = time.perf_counter()
-    n_workers = worker_count(workers)
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
+    n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
+                             * robot.n_segments)
     library = default_library(data.frame) if library is None else tuple(library)
     nominal = default_nominal(data.frame) if nominal is None else tuple(nominal)
     # constant curvature; the rod variant (segments in pieces) only while an effect needs it (Problem)
