@@ -122,7 +122,7 @@ def markdown(res) -> str:
               "process) | XLA compilations |"),
              "|---|---|---|---|---:|---:|---:|"]
     for r in res["rows"]:
-        workers = {"default": "default (1 here)", "0": "none", None: "-"}[r.get("workers")]
+        workers = {"default": "default", "0": "none", None: "-"}[r.get("workers")]
         lines.append(f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {workers} | {r['seconds']:.1f} | "
                      f"{r['wall_seconds']:.1f} | {r['compilations']} |")
     return "\n".join(lines)
