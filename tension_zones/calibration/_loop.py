@@ -35,6 +35,10 @@ For any robot (one segment or many) and any reader:
    so too. Measured on FTDCR v4 (the same effects chosen): validation 6.592 -> 6.150 mm (aligned
    6.293 -> 5.904 mm). Where the loop's fits run on their own rows (large recordings:
    :meth:`Problem._fit_rows`), this refit has more rows and runs one more program.
+
+The fits of one step that do not depend on each other (a round's short and full refits, the backward
+step's, the final ones) run on worker processes too where there are spare cores (:mod:`._fits`); the
+decisions read their results in the same order, so the report is the same.
 """
 
 from __future__ import annotations
