@@ -185,7 +185,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     ``library`` / ``nominal``: candidate and always-fitted effects (defaults by the data's frame,
     :func:`.effects.library`). ``log`` (callable taking a str) reports progress. ``workers``: processes
     that run the loop's independent fits alongside this one (:mod:`._fits`; None: one per spare core
-    where starting them is safe, ``TENSION_ZONES_WORKERS`` if set); the result is the same with any.
+    where starting them is safe and the recording is large enough, ``TENSION_ZONES_WORKERS`` if set);
+    the result is the same with any.
     """
     t0 = time.perf_counter()
     say = log or (lambda s: None)
