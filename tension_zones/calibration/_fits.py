@@ -6,8 +6,8 @@ end the refits of every accepted model on all samples. :class:`Fits` is what one
 same code wherever it runs); :class:`Runner` runs a list of them on the main process and on worker
 processes.
 
-**Why processes.** XLA:CPU runs one call of the calibration engine on about one core (an FTDCR v4 fit
-keeps one process at 105-110 % CPU of this machine's 200 %), so a second core idles through the loop.
+**Why processes.** XLA:CPU runs one call of the calibration engine on about one core (an FTDCR v4
+calibration kept its process at 107-113 % CPU of this machine's 200 % in ``top``), so a second core idles through the loop.
 Threads cannot use it: two Python threads executing the engine at once deadlocked
 (``benchmarks/README.md``). Each worker is a process with its own copy of the :class:`Problem` (model,
 robot, data and blocks, pickled once at the start) and its own compiled programs. The main process
@@ -20,9 +20,9 @@ look at the list's results in the list's order.
 variable-curvature effect's, ``Effect.pieces``) first, then the constant-curvature one (which the main
 process compiles meanwhile: with the cache on, the worker loads it), then the final refit's on every
 sample (where the loop's fits run on their own rows, :meth:`Problem._fit_rows`). With the compilation
-cache on (``tension_zones._xla``), the main process waits for that job before it first runs the rod
-or the final refit, and loads the worker's programs instead of compiling its own (on this 2-core
-machine a compile takes 10-15 s).
+cache on (``tension_zones._xla``), before the main process first runs the rod or the final refit it
+waits for the worker's job if that has started (and cancels it if not), and loads the worker's
+program instead of compiling its own (on this 2-core machine a compile takes 10-15 s).
 
 **Where workers are started.** Python's ``spawn`` starts a worker by importing the calling program's
 main module again: a script whose top level calls :func:`calibrate` without an
