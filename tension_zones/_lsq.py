@@ -39,7 +39,7 @@ def huber_cost(r, w, c):
 
 
 def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=-jnp.inf, hi=jnp.inf,
-                        max_iter=40, tol=1e-10, rows=None, cols=None):
+                        max_iter=40, tol=1e-10, rows=None, cols=None, state=None):
     """Minimise ``sum_i w_i rho(|fun(theta)_i|)`` over the ``free`` parameters within ``[lo, hi]``.
 
     Args:
@@ -59,6 +59,11 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
             that serves many free sets with one compiled program). Forward mode costs about one
             model evaluation per column (the FTDCR v4 model's Jacobian: 32 of 71 columns in about a
             third of the time of all 71).
+        state: a warm start for ``fun`` (any pytree), or ``None``. Given one, ``fun`` is
+            ``(theta, state) -> (residuals, state)``: every pass evaluates the candidate from the
+            state of the last accepted parameters (e.g. the model's equilibria there, from which a
+            nearby candidate's take fewer iterations; the result must not depend on it beyond the
+            model's own tolerance). Not differentiated.
     Returns ``(theta, cost, iterations, residuals (M, d), Jacobian (M, d, K))`` at the result.
 
     Marquardt's scaling (damping ``lam diag(J'WJ)``), a step accepted only if the cost falls (a
@@ -82,18 +87,24 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
     lo = jnp.broadcast_to(jnp.asarray(lo, theta0.dtype), (P,))
     hi = jnp.broadcast_to(jnp.asarray(hi, theta0.dtype), (P,))
 
-    def res(th):
-        r = fun(th)
-        return r[:, None] if r.ndim == 1 else r
+    if state is None:  # no warm start: an empty state
+        state, plain = (), fun
+        fun = lambda th, s: (plain(th), s)
 
-    def res_jac(th):
+    def res(th, s):
+        r, s = fun(th, s)
+        return (r[:, None] if r.ndim == 1 else r), s
+
+    def res_jac(th, s):
         # the residuals ride along as the Jacobian's auxiliary output: the model is traced (and
         # compiled) once, not once for the value and again for its derivative
-        # (jax.jacfwd's own construction, over the chosen columns only)
-        r, J = jax.vmap(lambda v: jax.jvp(res, (th,), (v,)), out_axes=(None, -1))(basis)
-        return r, J
+        # (jax.jacfwd's own construction, over the chosen columns only); the state is the primal's
+        s = jax.lax.stop_gradient(s)
+        r, J, s = jax.vmap(lambda v: jax.jvp(lambda t: res(t, s), (th,), (v,), has_aux=True),
+                           out_axes=(None, -1, None))(basis)
+        return r, J, s
 
-    r_shape = jax.eval_shape(res, theta0).shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
+    r_shape = jax.eval_shape(res, theta0, state)[0].shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
     w = jnp.ones(r_shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
 
     def propose(th, r, J, lam):
@@ -113,27 +124,28 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
 
     # One model evaluation per pass (a single copy of the model in the compiled program): evaluate
     # the candidate, accept it if it lowers the cost (the first pass always does), propose the next.
-    def body(state):
-        th, r, J, cost, cand, lam, it, _ = state
-        r_c, J_c = res_jac(cand)
+    def body(carry):
+        th, r, J, cost, cand, lam, it, _, s = carry
+        r_c, J_c, s_c = res_jac(cand, s)
         cost_c = huber_cost(r_c, w, huber)
         ok = cost_c < cost
         ok = ok | (it == 0)
         rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
         done = (ok & (it > 0) & (rel < tol)) | (lam > 1e12)
         th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
+        s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), s_c, s)
         cost = jnp.where(ok, cost_c, cost)
         lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
         cand = propose(th, r, J, lam)
         # no parameter can move (each free one held on its bound): nothing left to try
-        return th, r, J, cost, cand, lam, it + 1, done | jnp.all(cand == th)
+        return th, r, J, cost, cand, lam, it + 1, done | jnp.all(cand == th), s
 
-    def cond(state):
-        return (state[6] <= max_iter) & ~state[7]
+    def cond(carry):
+        return (carry[6] <= max_iter) & ~carry[7]
 
     dt = theta0.dtype
     start = jnp.clip(theta0, lo, hi)
-    state = (start, jnp.zeros(r_shape, dt), jnp.zeros(r_shape + (K,), dt), jnp.asarray(jnp.inf, dt), start,
-             jnp.asarray(1e-3, dt), 0, False)
-    th, r, J, cost, _, _, it, _ = jax.lax.while_loop(cond, body, state)
+    carry = (start, jnp.zeros(r_shape, dt), jnp.zeros(r_shape + (K,), dt), jnp.asarray(jnp.inf, dt), start,
+             jnp.asarray(1e-3, dt), 0, False, state)
+    th, r, J, cost, _, _, it, _, _ = jax.lax.while_loop(cond, body, carry)
     return th, cost, it, r, J

@@ -105,3 +105,36 @@ def test_bounded_linear_least_squares_matches_scipy_in_a_few_passes():
         assert int(it) <= 12
         held.append(int(np.sum(np.abs(ref) == 1.0)))
     assert max(held) == 5 and min(held) >= 3  # the cases span partly and wholly held boxes
+
+
+def test_a_warm_start_state_follows_the_accepted_parameters():
+    """``state``: every pass starts the model from the state of the last accepted pass (here the roots
+    of ``z^3 = a t + b``, solved by Newton from the state, exact from any start, and the parameters
+    they were solved for), and the fit is the one without a warm start."""
+    t = jnp.linspace(0.0, 1.0, 30)
+    y = jnp.cbrt(6.0 * t + 2.0) + 0.01 * jnp.sin(40.0 * t)  # not an exact fit: some steps are rejected
+    seen = []
+
+    def roots(x, z):
+        c = x[0] * t + x[1]
+        step = lambda z: z - (z**3 - c) / (3.0 * z**2)
+        return jax.lax.while_loop(lambda z: jnp.max(jnp.abs(step(z) - z)) > 1e-14, step, z)
+
+    def warm(x, state):
+        jax.debug.callback(lambda x, s: seen.append((np.array(x), np.array(s[0]), np.array(s[1]))), x, state)
+        z = roots(x, state[0])
+        return z - y, (z, x)
+
+    x0 = jnp.asarray([1.0, 9.0])
+    x, cost, it, _, _ = levenberg_marquardt(warm, x0, max_iter=60, tol=1e-15, state=(jnp.ones_like(t), x0))
+    x_cold, cost_cold, *_ = levenberg_marquardt(lambda x: roots(x, jnp.ones_like(t)) - y, x0, max_iter=60, tol=1e-15)
+    np.testing.assert_allclose(np.asarray(x), np.asarray(x_cold), rtol=1e-7)  # the same minimum
+    assert abs(float(cost) - float(cost_cold)) < 1e-12 and len(seen) == int(it)
+    cost_of = [float(np.sum((np.cbrt(xk[0] * np.asarray(t) + xk[1]) - np.asarray(y)) ** 2)) for xk, _, _ in seen]
+    for k in range(1, len(seen)):
+        _, zk, sx = seen[k]
+        j = [i for i in range(k) if np.array_equal(seen[i][0], sx)]  # the pass whose state it is
+        assert j and cost_of[j[0]] <= min(cost_of[:k]) + 1e-12  # the best so far: the accepted one
+        np.testing.assert_allclose(zk, np.cbrt(sx[0] * np.asarray(t) + sx[1]), rtol=1e-12)
+    rejected = sum(np.array_equal(seen[k][2], seen[k + 1][2]) for k in range(1, len(seen) - 1))
+    assert rejected > 0  # the state stayed with the accepted parameters past a rejected pass

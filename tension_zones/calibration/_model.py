@@ -5,7 +5,10 @@ A *model* is any hashable object with
 * ``physical(robot) -> phys``: the declared physical parameters, a dict pytree;
 * ``inputs(data) -> inputs``: per-sample arrays (sample axis first) derived from a ``Dataset``;
 * ``predict(phys, inputs) -> {"p": (N, 3), "R": (N, 3, 3)}``: the tip for every sample;
-* ``structure``: the static wire counts (:class:`~tension_zones.model.Structure`) the effects read.
+* ``structure``: the static wire counts (:class:`~tension_zones.model.Structure`) the effects read;
+* optionally ``start(n, dtype) -> state`` and ``predict(phys, inputs, state=state)``, which then also
+  returns ``"state"``: a per-sample state (sample axis first) from which a prediction for nearby
+  parameters is cheaper (the fits pass it from one pass to the next: :func:`tension_zones._lsq.levenberg_marquardt`).
 
 :class:`RobotModel` is the package's: the equilibrium of :mod:`tension_zones.model._equilibrium`
 for any number of segments, one ``vmap`` over the samples.
@@ -19,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from ..model import Robot, Structure
-from ..model._equilibrium import piece_lengths, solve
+from ..model._equilibrium import cold_state, piece_lengths, solve_warm
 from ..model._robot import chain_tip
 from ._data import Dataset
 
@@ -83,12 +86,22 @@ class RobotModel:
         for all samples. Unloaded, the solve takes its cheap path and the rod is constant curvature."""
         return jnp.any(inputs["f"] != 0) | jnp.any(phys["gravity"] != 0)
 
-    def predict(self, phys, inputs):
-        """Tip positions and orientations for all samples (one vmap over the equilibrium)."""
+    def start(self, n: int, dtype=float):
+        """The equilibria's cold start for ``n`` samples (:func:`~tension_zones.model._equilibrium.cold_state`)."""
+        x, HL = cold_state(self.structure, dtype)
+        return jnp.broadcast_to(x, (n,) + x.shape), jnp.broadcast_to(HL, (n,) + HL.shape)
+
+    def predict(self, phys, inputs, state=None):
+        """Tip positions and orientations for all samples (one vmap over the equilibrium). With
+        ``state`` (:meth:`start`, or a previous prediction's ``"state"``: each sample's equilibrium
+        and the load curvature its solve learnt) the solves start there, and the result has the new
+        ``"state"`` too: a fit's next pass, at nearby parameters, then takes fewer Newton iterations
+        (measured on FTDCR v4, loaded: 5-6 instead of 9)."""
         st = self.structure
         loaded = self.loaded(phys, inputs)  # one flag for all samples (outside the vmap)
-        B = jax.vmap(lambda q, f, d: solve(phys, st, q, f, d, loaded=loaded))(
-            inputs["q"], inputs["f"], inputs["direction"])
+        s0 = self.start(inputs["q"].shape[0], inputs["q"].dtype) if state is None else state
+        B, s1 = jax.vmap(lambda q, f, d, s: solve_warm(phys, st, q, f, d, s, loaded=loaded))(
+            inputs["q"], inputs["f"], inputs["direction"], s0)
         lengths = piece_lengths(phys, st)
         p, R = jax.vmap(lambda b: chain_tip(lengths, b))(B)
-        return {"p": p, "R": R}
+        return {"p": p, "R": R} if state is None else {"p": p, "R": R, "state": s1}

@@ -64,14 +64,15 @@ def _on_params(spec: Spec, parts, on, phys):
     return phys
 
 
-def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None):
+def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None, state=None):
     """The tip (``{"p", "R"}``, sample axis first) for the parameter vector ``theta`` and the blocks
     ``on`` (B,) 0/1, all blocks applied in stages (parameters, inputs, outputs); ``rows`` (K,): only
-    those samples (after the input stage, which may depend on the whole sequence, e.g. backlash)."""
+    those samples (after the input stage, which may depend on the whole sequence, e.g. backlash).
+    ``state``: the model's warm start for those samples (``_model``), then ``"state"`` is in the result."""
     phys, inputs, parts, on = stages(spec, theta, on, phys0, inputs)
     if rows is not None:
         inputs = jax.tree_util.tree_map(lambda a: a[rows], inputs)
-    out = spec.model.predict(phys, inputs)
+    out = spec.model.predict(phys, inputs) if state is None else spec.model.predict(phys, inputs, state=state)
     for blk, th in zip(spec.blocks, parts):
         out = blk.on_outputs(th, out, spec.model, on)
     return out
@@ -84,10 +85,18 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
     evaluated on (all of them, or a fit's own: see :meth:`Problem.fit`); path-dependent inputs are
     formed on the whole recording first. ``w`` (K,) their weights. ``cols`` (C,): the parameters
     differentiated (all, or a fit's free ones, padded). See
-    :func:`tension_zones._lsq.levenberg_marquardt`."""
-    fun = lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]  # noqa: E731
+    :func:`tension_zones._lsq.levenberg_marquardt`. A model with a warm start (``start``, see
+    ``_model``) starts every pass from the last accepted one's state."""
+    if not hasattr(spec.model, "start"):
+        fun, state = (lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]), None
+    else:
+        def fun(th, s):
+            out = predict_theta(spec, th, on, phys0, inputs, rows, state=s)
+            return out["p"] - y[rows], out["state"]
+
+        state = spec.model.start(rows.shape[0], y.dtype)
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
-                               cols=cols)
+                               cols=cols, state=state)
 
 
 #: The engine's programs in this process, by model (``Spec``) and the arguments' shapes.

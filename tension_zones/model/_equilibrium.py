@@ -28,8 +28,7 @@ so the iteration's fixed point is the root of ``F``.
 
 **Solver.** Damped Newton on ``V`` (friction frozen at the iterate, above): the backbone's and the
 wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
-branch-free line search: ten step sizes evaluated at once, the largest that satisfies Armijo's
-condition taken.
+backtracking line search over ten step sizes, the largest that satisfies Armijo's condition taken.
 ``max(s, 0)^2`` is only C1, so Newton is exact within a set of taut wires and the line search
 handles set changes. The derivatives come from the implicit function theorem on ``F(x*) = 0``
 (a custom JVP), never from the iterations. Per sample; ``vmap`` it.
@@ -76,7 +75,7 @@ MAX_STEP = 0.5
 #: ``curvature_freedom`` regularisation: at ``r = 0`` a segment's pieces deviate from their mean bending
 #: by this fraction of the rod's variation.
 _FREEDOM_EPS = 1e-3
-#: Step sizes of the line search, all evaluated at once (no value-dependent branching).
+#: Step sizes of the line search, tried from the largest down.
 _STEPS = 2.0 ** -np.arange(10)
 
 
@@ -348,7 +347,7 @@ class _Sample:
         return self.hess(x, t) + jax.lax.cond(self.has_friction, self.friction_matrix, lambda *_: zero, x, t)
 
 
-def _newton(sm: _Sample, x0):
+def _newton(sm: _Sample, x0, HL0):
     """Damped Newton on ``V`` (friction frozen within a step): the backbone's and the wires' Hessian exact,
     the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
     the start and without a load), so that a loaded solve converges superlinearly without second
@@ -356,9 +355,10 @@ def _newton(sm: _Sample, x0):
     is added (not symmetric: an LU solve) and its force beyond the mean factors is frozen in ``V``
     (module notes); without it the step is a Cholesky solve. Where that step gives no descent the
     step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
-    ``_STEPS`` with Armijo's decrease is taken."""
+    ``_STEPS`` with Armijo's decrease is taken (tried from the largest down). Starts from ``x0`` (2P,) with the load curvature ``HL0``
+    (2P, 2P) (a previous solve's, :func:`solve_warm`; zero for a cold start) and returns both at the
+    end."""
     steps = jnp.asarray(_STEPS, x0.dtype)
-    n = x0.shape[0]
 
     def solve(H, g):
         return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
@@ -372,10 +372,25 @@ def _newton(sm: _Sample, x0):
     def without(x, t, H, g0):  # V's own Newton step (symmetric: Cholesky)
         return jnp.zeros_like(g0), solve(H, g0)
 
+    def search(x, d, t, rest, g, v0):
+        # backtracking: the largest of ``_STEPS`` with Armijo's decrease (with a round-off allowance,
+        # so converged steps are not rejected by noise in V), tried from the largest down; under a
+        # vmap over samples it runs until every sample has its step, which near the equilibrium is
+        # the first (evaluating all ten at once cost ~15 % more: benchmarks/README.md)
+        def more(c):
+            return (c[0] < steps.shape[0]) & ~c[1]
+
+        def next_step(c):
+            s = steps[c[0]]
+            ok = sm.value(x + s * d, t) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
+            return jnp.where(ok, c[0], c[0] + 1), ok
+
+        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
+        return jnp.where(found, steps[jnp.minimum(j, steps.shape[0] - 1)], 0.0) * d
+
     def body(state):
-        x, HL, it, _ = state
+        x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
         t = sm.factor(x)
-        gl = sm.load_grad(x)
         g0, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
         # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
         # it stays a branch there, and a robot without friction skips its terms and the LU solve
@@ -384,27 +399,23 @@ def _newton(sm: _Sample, x0):
         d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
-        v0 = sm.value(x, t)
-        vs = jax.vmap(lambda s: sm.value(x + s * d, t) + s * jnp.dot(rest, d))(steps)
-        # Armijo with a round-off allowance, so converged steps are not rejected by noise in V
-        ok = vs <= v0 + 1e-4 * steps * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
-        step = jnp.where(jnp.any(ok), steps[jnp.argmax(ok)], 0.0) * d
+        step = search(x, d, t, rest, g, sm.value(x, t))
         x_new = x + step
         # SR1 update of the load's curvature from the change of its gradient along the step
-        y = sm.load_grad(x_new) - gl
-        r = y - HL @ step
+        gl_new = sm.load_grad(x_new)
+        r = gl_new - gl - HL @ step
         rs = jnp.dot(r, step)
         use = jnp.abs(rs) > 1e-8 * jnp.sqrt(jnp.dot(r, r) * jnp.dot(step, step)) + 1e-300
         HL = HL + jnp.where(use, jnp.outer(r, r) / jnp.where(use, rs, 1.0), 0.0)
         done = jnp.max(jnp.abs(step)) <= 1e-13 * (1.0 + jnp.max(jnp.abs(x)))
-        return x_new, HL, it + 1, done
+        return x_new, HL, gl_new, it + 1, done
 
     def cond(state):
-        return (state[2] < MAX_ITER) & ~state[3]
+        return (state[3] < MAX_ITER) & ~state[4]
 
-    init = (x0, jnp.zeros((n, n), x0.dtype), jnp.asarray(0), jnp.asarray(False))
-    x, _, _, _ = jax.lax.while_loop(cond, body, init)
-    return x
+    init = (x0, HL0, sm.load_grad(x0), jnp.asarray(0), jnp.asarray(False))
+    x, HL, _, _, _ = jax.lax.while_loop(cond, body, init)
+    return x, HL
 
 
 @functools.lru_cache(maxsize=None)
@@ -415,18 +426,19 @@ def _solver(structure: Structure):
         return _Sample(phys, structure, q, f, direction, loaded).force(x)
 
     @jax.custom_jvp
-    def solve_x(phys, q, f, direction, loaded, x0):
-        return _newton(_Sample(phys, structure, q, f, direction, loaded), x0)
+    def solve_x(phys, q, f, direction, loaded, x0, HL0):
+        return _newton(_Sample(phys, structure, q, f, direction, loaded), x0, HL0)
 
     @solve_x.defjvp
     def solve_x_jvp(primals, tangents):
         # Implicit function theorem on F(x*, p) = 0: dx = -(dF/dx)^-1 (dF/dp . dp); dF/dp . dp by
-        # forward mode at fixed x (x carries no tangent), dF/dx in closed form.
-        phys, q, f, direction, loaded, x0 = primals
-        x = solve_x(*primals)
+        # forward mode at fixed x (x carries no tangent), dF/dx in closed form. The start and the
+        # learnt load curvature (a warm start's state) carry no derivative.
+        phys, q, f, direction, loaded, _, _ = primals
+        x, HL = solve_x(*primals)
         _, rhs = jax.jvp(lambda *p: force(x, *p, loaded), primals[:4], tangents[:4])
         Jx = _Sample(phys, structure, q, f, direction, loaded).force_jacobian(x)
-        return x, -jnp.linalg.solve(Jx, rhs)
+        return (x, HL), (-jnp.linalg.solve(Jx, rhs), jnp.zeros_like(HL))
 
     return solve_x
 
@@ -445,14 +457,33 @@ def solve(phys, structure: Structure, q, f, direction=None, x0=None, loaded=None
     is one value for all, to keep unloaded robots cheap).
     """
     dt = jnp.result_type(phys["length"], q, float)
-    q = jnp.asarray(q, dt)
-    f = jnp.asarray(f, dt)
+    P = structure.n_pieces
+    x0 = jnp.zeros(2 * P, dt) if x0 is None else jnp.asarray(x0, dt).reshape(-1)
+    return solve_warm(phys, structure, q, f, direction, (x0, jnp.zeros((2 * P, 2 * P), dt)), loaded)[0]
+
+
+def cold_state(structure: Structure, dtype=float):
+    """The state :func:`solve_warm` starts from without a previous solve: ``(x (2P,), HL (2P, 2P))``,
+    zero bending and no load curvature learnt."""
+    n = 2 * structure.n_pieces
+    return jnp.zeros(n, dtype), jnp.zeros((n, n), dtype)
+
+
+def solve_warm(phys, structure: Structure, q, f, direction, state, loaded=None):
+    """:func:`solve` started from ``state`` = ``(x (2P,), HL (2P, 2P))``: a previous solve's bending and
+    the load curvature its Newton iterations learnt (:func:`_newton`), or :func:`cold_state`. Returns
+    ``(B* (P, 2), state)``, the state to start a solve for nearby parameters from (e.g. the next pass
+    of a fit: the load's curvature already learnt, Newton converges in fewer iterations). The result
+    is the same root whatever the start (to the Newton tolerance); the state carries no derivative.
+    Per sample; ``loaded`` as in :func:`solve`."""
+    dt = jnp.result_type(phys["length"], q, float)
+    q, f = jnp.asarray(q, dt), jnp.asarray(f, dt)
     direction = jnp.zeros_like(q) if direction is None else jnp.asarray(direction, dt)
     if loaded is None:
         loaded = jnp.any(f != 0) | jnp.any(phys["gravity"] != 0)
-    P = structure.n_pieces
-    x0 = jnp.zeros(2 * P, dt) if x0 is None else jax.lax.stop_gradient(jnp.asarray(x0, dt).reshape(-1))
-    return _solver(structure)(phys, q, f, direction, jax.lax.stop_gradient(loaded), x0).reshape(P, 2)
+    x0, HL0 = (jax.lax.stop_gradient(jnp.asarray(a, dt)) for a in state)
+    x, HL = _solver(structure)(phys, q, f, direction, jax.lax.stop_gradient(loaded), x0.reshape(-1), HL0)
+    return x.reshape(structure.n_pieces, 2), (x, HL)
 
 
 def piece_lengths(phys, structure: Structure):
