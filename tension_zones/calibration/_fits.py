@@ -229,16 +229,17 @@ class Runner:
         with contextlib.suppress(Exception):  # a worker that failed: the main process compiles its own
             f.result()
 
-    def map(self, method: str, jobs: list, cost=None) -> list:
-        """``getattr(fits, method)(*args)`` for every ``args`` in ``jobs``, results in their order.
-        ``cost`` (one number per job, :meth:`Problem.cost`: the rod's fits cost several of the
-        constant-curvature model's): the workers start with the costliest, so that the longest job
-        does not start last."""
+    def map(self, method: str, jobs: list) -> list:
+        """``getattr(fits, method)(*args)`` for every ``args`` in ``jobs`` (each ``(theta0, active, ...)``),
+        results in their order. The workers start with the costliest (:meth:`Problem.cost` of the job's
+        ``active``: the rod's fits cost several of the constant-curvature model's), so that the
+        longest job does not start last."""
         if self.pool is None or len(jobs) < 2:
             return [self._local(method, a) for a in jobs]
         from concurrent.futures.process import BrokenProcessPool
 
-        order = sorted(range(len(jobs)), key=lambda i: -cost[i]) if cost is not None else list(range(len(jobs)))
+        cost = [self.fits.pb.cost(a[1]) for a in jobs]
+        order = sorted(range(len(jobs)), key=lambda i: -cost[i])
         try:
             futures = {i: self.pool.submit(_job, method, self.fits.sigma, tuple(jobs[i])) for i in order}
         except (BrokenProcessPool, RuntimeError):

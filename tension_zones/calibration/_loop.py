@@ -294,7 +294,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
                 # as much as several of the others')
                 jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in significant]
-                for s, e in zip(significant, run.map("screen", jobs, [pb.cost(a) for _, a in jobs])):
+                for s, e in zip(significant, run.map("screen", jobs)):
                     s["screened_rmse_mm"] = e
                 say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
                 # a candidate whose short refit does not lower the held-out error by a quarter of the drop
@@ -311,7 +311,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                                      key=lambda s: s["screened_rmse_mm"])
             chosen = significant[:TRIES_PER_ROUND]
             jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in chosen]
-            for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs, [pb.cost(a) for _, a in jobs])):
+            for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs)):
                 drop = (err**2 - err_new**2) * m / unit
                 need = chi2_quantile(alpha, max(s["dof"], 1))
                 # the training part's gain, tested the same way: not a share of the held-out gain, since the
@@ -378,7 +378,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         # (with the refits of the validation steps' models, below, at once)
         jobs = [(theta, active, False)] + [(th, act, True) for act, th in models[:-1]] * bool(val.any())
         run.warmed("final")
-        done = run.map("refit_all", jobs, [pb.cost(a) for _, a, _ in jobs])
+        done = run.map("refit_all", jobs)
         theta_sel, theta = theta, done[0][0]
         r_final, J_final = pb.jacobian(theta, active)
         free = pb.mask(active)

@@ -87,14 +87,13 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
     differentiated (all, or a fit's free ones, padded). See
     :func:`tension_zones._lsq.levenberg_marquardt`. A model with a warm start (``start``, see
     ``_model``) starts every pass from the last accepted one's state."""
-    if not hasattr(spec.model, "start"):
-        fun, state = (lambda th: predict_theta(spec, th, on, phys0, inputs, rows)["p"] - y[rows]), None
-    else:
-        def fun(th, s):
-            out = predict_theta(spec, th, on, phys0, inputs, rows, state=s)
-            return out["p"] - y[rows], out["state"]
+    warm = hasattr(spec.model, "start")
 
-        state = spec.model.start(rows.shape[0], y.dtype)
+    def fun(th, s):
+        out = predict_theta(spec, th, on, phys0, inputs, rows, state=s if warm else None)
+        return out["p"] - y[rows], out["state"] if warm else s
+
+    state = spec.model.start(rows.shape[0], y.dtype) if warm else ()
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
                                cols=cols, state=state)
 
