@@ -44,7 +44,7 @@ def run(folder, name, truth, seed=3, steps=10):
     # validation file every accepted model's) have more rows: one more program for each variant among
     # those models (constant curvature, the rod)
     rod = any(c["name"] == "variable_curvature" and "not_scored" not in c for c in rep["candidates"])
-    own_rows = res.problem._shape[0] < res.problem.n_padded
+    own_rows = res.problem._rows < res.problem.n_padded
     variants = {"variable_curvature" in step["effects"] for step in rep["steps"]}
     assert compilations() - before <= 1 + rod + own_rows * len(variants)
     return rep

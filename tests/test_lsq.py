@@ -84,6 +84,37 @@ def test_differentiating_only_the_free_columns_gives_the_same_fit():
     assert float(some[0][2]) == 0.02
 
 
+def test_a_traced_column_count_differentiates_only_those_columns():
+    """``n_cols`` (traced): one compiled program differentiates the first ``n_cols`` of ``cols``
+    (whole groups of ``COL_GROUP``, the rest 0), equal to ``jax.jacfwd`` there; ``n_cols = 0`` gives
+    the residuals alone, and a fit with the free columns first equals the one over every column."""
+    from tension_zones._lsq import COL_GROUP
+
+    rng = np.random.default_rng(4)
+    P = 2 * COL_GROUP + 3
+    A = jnp.asarray(rng.normal(size=(30, P)) / np.sqrt(P))
+    fun = lambda th: jnp.sin(A @ th) - 0.2
+    x0 = jnp.asarray(rng.normal(size=P) * 0.3)
+    cols = jnp.asarray(rng.permutation(P))
+    f = jax.jit(lambda x, n, it, free: levenberg_marquardt(fun, x, free=free, max_iter=it, cols=cols, n_cols=n))
+    ref = np.asarray(jax.jacfwd(fun)(x0))[:, None, :][:, :, np.asarray(cols)]
+    ones = jnp.ones(P)
+    for n in (0, 1, COL_GROUP, COL_GROUP + 1, P):
+        _, _, _, r, J = f(x0, n, 0, ones)
+        assert J.shape == (30, 1, P)
+        np.testing.assert_allclose(r[:, 0], fun(x0), rtol=1e-14)
+        done = min(P, -(-n // COL_GROUP) * COL_GROUP)
+        np.testing.assert_allclose(J[:, :, :done], ref[:, :, :done], rtol=1e-12, atol=1e-15)
+        np.testing.assert_array_equal(np.asarray(J[:, :, done:]), 0.0)
+    free = np.zeros(P)
+    free[np.asarray(cols)[:5]] = 1.0
+    some = f(x0, 5, 30, jnp.asarray(free))
+    full = levenberg_marquardt(fun, x0, free=jnp.asarray(free), max_iter=30)
+    np.testing.assert_allclose(some[0], full[0], rtol=1e-12, atol=1e-14)
+    assert int(some[2]) == int(full[2])
+    assert f._cache_size() == 1
+
+
 def test_bounded_linear_least_squares_matches_scipy_in_a_few_passes():
     """Correlated columns whose free optimum lies outside the box in several coordinates: the
     bounded solution is SciPy's (BVLS), reached in a few passes (an active set, not a clipped step:

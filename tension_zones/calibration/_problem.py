@@ -78,7 +78,7 @@ def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None, state=None):
     return out
 
 
-def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter, cols):
+def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_iter, cols, n_cols):
     """The one compiled function of the loop: a fit of the free parameters (``max_iter = 0`` only
     evaluates, so predictions and score tests need no compilation of their own), then the residuals
     (K, 3) and their Jacobian (K, 3, C) at the result. ``rows`` (K,): the samples the model is
@@ -95,7 +95,7 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
 
     state = spec.model.start(rows.shape[0], y.dtype) if warm else ()
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
-                               cols=cols, state=state)
+                               cols=cols, n_cols=n_cols, state=state)
 
 
 #: The engine's programs in this process, by model (``Spec``) and the arguments' shapes.
@@ -155,10 +155,6 @@ FIT_TOL = 1e-5
 FIT_ROWS_MIN = 1024
 FIT_ROWS_SHARE = 0.75
 
-#: A fit differentiates its free parameters, padded to a multiple of this (see
-#: :meth:`Problem._fit_cols`): forward mode costs about one model evaluation per column.
-COLS_STEP = 8
-
 #: Sample counts are padded up to a multiple of this (padding repeats the last sample at zero weight,
 #: after the real ones, so path-dependent state is untouched): sets of similar size share one program
 #: (e.g. the shipped 400- and 500-sample sets of one robot), for at most 127 rows evaluated in vain.
@@ -203,7 +199,7 @@ class Problem:
         self.hi = np.concatenate([b.bounds(model, phys_np)[1] for b in blocks])
         self._phys_np = phys_np
         self._specs = {1: self.spec}
-        self._shape = None  # (rows, columns) of the fits' own program, once one has run
+        self._rows = None  # the rows of the fits' own program, once one has run
 
     def spec_for(self, active) -> Spec:
         """The program for the model made of ``active``: the model itself, or its variant in pieces
@@ -243,10 +239,11 @@ class Problem:
     def on(self, active) -> np.ndarray:
         return np.array([1.0 if b.name in active else 0.0 for b in self.spec.blocks])
 
-    def _call(self, theta0, active, free, rows, w, huber_c, max_iter, cols):
+    def _call(self, theta0, active, free, rows, w, huber_c, max_iter, cols, n_cols):
         out = engine(self.spec_for(active), jnp.asarray(theta0), jnp.asarray(free), jnp.asarray(self.on(active)),
                      jnp.asarray(rows), jnp.asarray(w), jnp.asarray(huber_c, float), jnp.asarray(self.lo),
-                     jnp.asarray(self.hi), self.phys0, self.inputs, self.y, jnp.asarray(max_iter), jnp.asarray(cols))
+                     jnp.asarray(self.hi), self.phys0, self.inputs, self.y, jnp.asarray(max_iter), jnp.asarray(cols),
+                     jnp.asarray(n_cols))
         return tuple(np.asarray(x) for x in out)
 
     def _fit(self, theta0, active, free, weights, huber_c, max_iter) -> np.ndarray:
@@ -254,36 +251,34 @@ class Problem:
         w = np.zeros(self.n_padded)
         w[: self.n] = weights  # padded samples never count
         rows, w = self._fit_rows(w)
-        cols = self._fit_cols(free)
-        self._shape = self._shape or (len(rows), len(cols))  # evaluations from now on run this program
-        return self._call(theta0, active, free, rows, w, huber_c, max_iter, cols)[0]
+        cols, n_cols = self._fit_cols(free)
+        self._rows = self._rows or len(rows)  # evaluations from now on run this program
+        return self._call(theta0, active, free, rows, w, huber_c, max_iter, cols, n_cols)[0]
 
     def _evaluate(self, theta, active, jacobian=True, samples=None):
         """Residuals (N, 3) and, with ``jacobian``, their Jacobian (N, 3, P) at ``theta``: before any
-        fit, one call of the program over every sample and parameter; once a fit has run, calls of
-        the fits' program (their rows: :meth:`_fit_rows`, their columns: :meth:`_fit_cols`) over
-        pieces of the samples and of the parameters, so that a calibration compiles one program per
-        model (a compilation costs more than the pieces' overlap; residuals alone need one piece of
-        the columns, which costs less than all of them). ``samples`` (K,): only those (path-dependent
-        inputs are still formed over the whole recording), (K, 3) and (K, 3, P)."""
+        fit, one call of the program over every sample; once a fit has run, calls of the fits'
+        program (their rows: :meth:`_fit_rows`) over pieces of the samples, so that a calibration
+        compiles one program per model and row count. Every column is differentiated, or none for
+        the residuals alone (the engine's column count is data: ``_lsq``'s ``n_cols``). ``samples``
+        (K,): only those (path-dependent inputs are still formed over the whole recording), (K, 3)
+        and (K, 3, P)."""
         theta = np.clip(np.asarray(theta, float), self.lo, self.hi)
         P, d = self.null.shape[0], self.y.shape[1]
-        k, c = self._shape or (self.n_padded, P)
+        k = self._rows or self.n_padded
         if samples is None:
             want = np.arange(self.n)
             rows = np.minimum(np.arange(-(-self.n_padded // k) * k), self.n_padded - 1).reshape(-1, k)
         else:  # the samples asked for, padded with the last of them
             want = np.asarray(samples, int)
             rows = np.r_[want, np.full(-len(want) % k, want[-1])].reshape(-1, k)
-        col_sets = [np.minimum(np.arange(i, i + c), P - 1) for i in range(0, P if jacobian else 1, c)]
         r = np.empty((rows.size, d))
         J = np.empty((rows.size, d, P)) if jacobian else None
         for i, rw in enumerate(rows):
-            for cs in col_sets:  # (a column repeated at the end of the last set has the same values)
-                out = self._call(theta, active, np.zeros(P), rw, np.zeros(k), np.inf, 0, cs)
-                r[i * k:(i + 1) * k] = out[3]
-                if jacobian:
-                    J[i * k:(i + 1) * k, :, cs] = out[4]
+            out = self._call(theta, active, np.zeros(P), rw, np.zeros(k), np.inf, 0, np.arange(P), P if jacobian else 0)
+            r[i * k:(i + 1) * k] = out[3]
+            if jacobian:
+                J[i * k:(i + 1) * k] = out[4]
         return r[:len(want)], (J[:len(want)] if jacobian else None)
 
     def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
@@ -293,23 +288,17 @@ class Problem:
         of no more rows pads to that fit's count (the same program). Returns the rows and their weights."""
         live = np.flatnonzero(w > 0)
         k = len(live) + (-len(live)) % FIT_PAD
-        if self._shape and len(live) <= self._shape[0]:
-            k = self._shape[0]  # fewer rows than the program has: pad, rather than compile another
+        if self._rows and len(live) <= self._rows:
+            k = self._rows  # fewer rows than the program has: pad, rather than compile another
         if self.n_padded < FIT_ROWS_MIN or k > FIT_ROWS_SHARE * self.n_padded or not len(live):
             return np.arange(self.n_padded), w
         return np.r_[live, np.full(k - len(live), live[-1])], np.r_[w[live], np.zeros(k - len(live))]
 
-    def _fit_cols(self, free) -> np.ndarray:
-        """The parameters a fit differentiates: its free ones, padded (by repeating the last) to half
-        the parameter vector (rounded up to a multiple of ``COLS_STEP``), or all of them where more
-        are free (a model that holds more than half the parameters then compiles that variant once)."""
-        P = self.null.shape[0]
-        live = np.flatnonzero(np.asarray(free) > 0)
-        k = min(P, COLS_STEP * -(-((P + 1) // 2) // COLS_STEP))
-        if len(live) > k:
-            return np.arange(P)
-        live = live if len(live) else np.zeros(1, int)  # nothing free: any column (it does not move)
-        return np.r_[live, np.full(k - len(live), live[-1])]
+    def _fit_cols(self, free) -> tuple[np.ndarray, int]:
+        """The parameters a fit differentiates: every parameter, the free ones first, and how many
+        are free (the engine pushes forward only those columns' groups: ``_lsq``'s ``n_cols``)."""
+        live = np.asarray(free) > 0
+        return np.r_[np.flatnonzero(live), np.flatnonzero(~live)], int(live.sum())
 
     def jacobian(self, theta, active, samples=None):
         """Residuals (N, 3) and Jacobian (N, 3, P) at ``theta`` of the model made of ``active``; with
