@@ -158,7 +158,9 @@ def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = No
     except ImportError:  # pragma: no cover  (an old JAX)
         return fn
     leaves, tree = jax.tree_util.tree_flatten(args)
-    avals = ";".join(f"{a.shape}{a.dtype}{getattr(a, 'weak_type', False)}" for a in map(jax.numpy.asarray, leaves))
+    # (an array's own shape and type: a jnp.asarray of a NumPy one would compile a small program)
+    arrays = (a if hasattr(a, "dtype") and hasattr(a, "shape") else jax.numpy.asarray(a) for a in leaves)
+    avals = ";".join(f"{a.shape}{a.dtype}{getattr(a, 'weak_type', False)}" for a in arrays)
     ident = "|".join([_sources_digest(), jax.__version__, ".".join(map(str, _jaxlib_version())),
                       jax.default_backend(), str(jax.config.jax_enable_x64), str(tree), avals, key,
                       repr(sorted((compiler_options or {}).items()))])

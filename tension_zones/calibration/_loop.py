@@ -48,7 +48,6 @@ import math
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..model import Design, Robot
@@ -163,7 +162,7 @@ class Result:
 
 def final_parameters(pb: Problem, theta, active) -> dict:
     """The physical parameters after every fitted effect, plus each fitted block in report units."""
-    phys = physical(pb.spec, jnp.asarray(theta), jnp.asarray(pb.on(active)), pb.phys0)
+    phys = physical(pb.spec, np.asarray(theta, np.float64), pb.on(active), pb.phys0)
     phys = jax.tree_util.tree_map(lambda x: np.asarray(x).tolist(), phys)
     phys["route_angles_deg"] = np.degrees(phys.pop("route_angles")).tolist()
     return {"physical": phys, "fitted": pb.describe(theta, active)}

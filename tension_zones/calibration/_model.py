@@ -27,6 +27,7 @@ from ..model._robot import chain_tip
 from ._data import Dataset
 
 
+@jax.jit
 def motion_direction(q, reset=None):
     """Last direction of motion of each wire, (N, n): +1 released, -1 pulled in, 0 not yet moved.
 
@@ -46,6 +47,15 @@ def motion_direction(q, reset=None):
 
     _, out = jax.lax.scan(step, jnp.zeros(q.shape[1], q.dtype), (dq, reset))
     return out
+
+
+@jax.jit
+def _declared(robot: Robot) -> dict:
+    """``robot.params()`` with no curvature freedom (see :class:`RobotModel`): one small program (run
+    eagerly, its operations compiled one at a time, some 15 of them, 0.3-0.5 s in every process)."""
+    phys = robot.params()
+    phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
+    return phys
 
 
 @dataclasses.dataclass(frozen=True)
@@ -69,9 +79,7 @@ class RobotModel:
         if robot.n_wires_per_segment != self.structure.n_wires_per_segment:
             raise ValueError(f"the robot has wire counts {robot.n_wires_per_segment}, the model "
                              f"{self.structure.n_wires_per_segment}")
-        phys = robot.params()
-        phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
-        return phys
+        return _declared(robot)
 
     def inputs(self, data: Dataset) -> dict:
         if data.n_wires != self.structure.n_wires:
