@@ -138,7 +138,7 @@ def _loaded(spec, theta, on, phys0, inputs):
 
 def compilations() -> int:
     """How many programs the engine has made in this process (compiled, or loaded from the cache; a
-    test counts them): one per model and shape (the fits' rows and columns), and one more for the rod
+    test counts them): one per model and shape (the fits' rows; the columns are data), and one more for the rod
     variant where an effect needs it."""
     return len(_PROGRAMS)
 
