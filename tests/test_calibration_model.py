@@ -202,3 +202,24 @@ def test_evaluations_in_the_fits_program_equal_one_evaluation_and_compile_nothin
     np.testing.assert_allclose(r, reference[0][some], rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(J, reference[1][some], rtol=1e-10, atol=1e-12)
     assert compilations() == size
+
+
+def test_a_program_compiled_ahead_on_a_thread_is_the_one_the_fits_run():
+    from functools import partial
+
+    from tension_zones.calibration import _problem
+
+    data = _data(650, 3, seed=5)  # 768 padded rows: a program no other test makes
+    pb = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, nominal("base") + library("base"))
+    active, w = ["backbone_EI", "backlash"], np.ones(650)
+    before = compilations()
+    thread = pb.compile_ahead(active, w)
+    assert thread is not None and compilations() == before + 1
+    theta = pb.fit(pb.null + 0.01, active, w, max_iter=4)  # waits for the thread's program
+    thread.join()
+    assert pb.compile_ahead(active, w) is None and compilations() == before + 1
+    # the same numbers as the engine jitted and compiled the usual way
+    spec, *args = pb._args(np.clip(pb.null + 0.01, pb.lo, pb.hi), active, pb.mask(active), np.arange(768),
+                           np.r_[w, np.zeros(118)], np.inf, 4, *pb._fit_cols(pb.mask(active)))
+    ref = jax.jit(partial(_problem._engine, spec), compiler_options=_problem.fast_compile_options())(*args)
+    np.testing.assert_array_equal(theta, np.asarray(ref[0]))

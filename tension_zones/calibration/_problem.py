@@ -13,6 +13,8 @@ a calibration that never needs the rod never pays for it.
 from __future__ import annotations
 
 import dataclasses
+import threading
+from concurrent.futures import Future
 from functools import partial
 
 import jax
@@ -98,8 +100,24 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
                                cols=cols, n_cols=n_cols, state=state)
 
 
-#: The engine's programs in this process, by model (``Spec``) and the arguments' shapes.
+#: The engine's programs in this process, by model (``Spec``) and the arguments' shapes: a callable, or
+#: the ``Future`` of one being compiled on a thread (:func:`engine_ahead`).
 _PROGRAMS: dict = {}
+
+
+def _key(spec, args):
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    return (spec, tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+
+
+def _program(spec, args):
+    """The engine's program for ``spec`` and arguments like ``args`` (jitted, not yet compiled)."""
+    opts = fast_compile_options()
+    fn = jax.jit(partial(_engine, spec), compiler_options=opts)
+    classes = [type(spec.model)] + [type(b) for b in spec.blocks]
+    if (outside := classes_digest(classes)) is not None:
+        fn = stored_program(fn, args, f"calibration engine|{spec!r}|{outside}|{FIT_TOL!r}", opts)
+    return fn
 
 
 def engine(spec, *args):
@@ -107,18 +125,46 @@ def engine(spec, *args):
     before tracing (``_xla.stored_program``: a later process skips its 2.5-3.5 s trace). The stored
     program's key holds the spec (its repr: the model's static structure and the blocks) and the
     sources of any block or model class defined outside the package; one defined where it has no
-    file (a notebook) is traced in every process."""
-    leaves, tree = jax.tree_util.tree_flatten(args)
-    key = (spec, tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+    file (a notebook) is traced in every process. A program being compiled on a thread
+    (:func:`engine_ahead`) is waited for."""
+    key = _key(spec, args)
     fn = _PROGRAMS.get(key)
+    if isinstance(fn, Future):
+        fn = fn.result()
     if fn is None:
-        opts = fast_compile_options()
-        fn = jax.jit(partial(_engine, spec), compiler_options=opts)
-        classes = [type(spec.model)] + [type(b) for b in spec.blocks]
-        if (outside := classes_digest(classes)) is not None:
-            fn = stored_program(fn, args, f"calibration engine|{spec!r}|{outside}|{FIT_TOL!r}", opts)
-        _PROGRAMS[key] = fn
+        fn = _PROGRAMS[key] = _program(spec, args)
     return fn(*args)
+
+
+def engine_ahead(spec, *args) -> threading.Thread | None:
+    """Start compiling :func:`engine`'s program for ``spec`` and arguments like ``args``, without
+    running it: traced and lowered here, compiled by XLA on a thread (which holds no GIL, so a second
+    core compiles while this one goes on: with the rod's program of a loaded single-segment set
+    lowered first, the constant-curvature one is traced while the rod compiles). The thread that calls
+    :func:`engine` with them later waits for it. Nothing is run on the thread: calls of the engine from
+    two threads at once deadlocked XLA:CPU. Returns the thread (join it before the process ends), or
+    None where the program exists already."""
+    key = _key(spec, args)
+    if key in _PROGRAMS:
+        return None
+    fn = _program(spec, args)
+    if not hasattr(fn, "lower"):
+        _PROGRAMS[key] = fn
+        return None
+    lowered = fn.lower(*args)
+    fut = _PROGRAMS[key] = Future()
+
+    def work():
+        try:
+            fut.set_result(lowered.compile())  # a Compiled executable: callable on these types
+            _PROGRAMS[key] = fut.result()
+        except BaseException:  # noqa: BLE001  (the caller compiles its own)
+            _PROGRAMS[key] = fn
+            fut.set_result(fn)
+
+    t = threading.Thread(target=work, name="tension-zones-compile", daemon=True)
+    t.start()
+    return t
 
 
 @partial(jax.jit, static_argnums=0)
@@ -241,15 +287,29 @@ class Problem:
     def on(self, active) -> np.ndarray:
         return np.array([1.0 if b.name in active else 0.0 for b in self.spec.blocks])
 
-    def _call(self, theta0, active, free, rows, w, huber_c, max_iter, cols, n_cols):
+    def _args(self, theta0, active, free, rows, w, huber_c, max_iter, cols, n_cols):
         # NumPy arrays straight into the program (a jnp.asarray of each compiled a small program of
         # its own at its first use in a process)
         f, i = np.float64, np.int64
-        out = engine(self.spec_for(active), np.asarray(theta0, f), np.asarray(free, f), np.asarray(self.on(active), f),
-                     np.asarray(rows, i), np.asarray(w, f), np.asarray(huber_c, f), np.asarray(self.lo, f),
-                     np.asarray(self.hi, f), self.phys0, self.inputs, self.y, np.asarray(max_iter, i),
-                     np.asarray(cols, i), np.asarray(n_cols, i))
-        return tuple(np.asarray(x) for x in out)
+        return (self.spec_for(active), np.asarray(theta0, f), np.asarray(free, f), np.asarray(self.on(active), f),
+                np.asarray(rows, i), np.asarray(w, f), np.asarray(huber_c, f), np.asarray(self.lo, f),
+                np.asarray(self.hi, f), self.phys0, self.inputs, self.y, np.asarray(max_iter, i),
+                np.asarray(cols, i), np.asarray(n_cols, i))
+
+    def _call(self, *args):
+        return tuple(np.asarray(x) for x in engine(*self._args(*args)))
+
+    def compile_ahead(self, active, weights) -> threading.Thread | None:
+        """Start compiling, on a thread, the program that fits of the model made of ``active`` on
+        ``weights`` (N,) and the evaluations after them will run (:func:`engine_ahead`); before the
+        process's first fit (which fixes the evaluations' row count) ``weights`` must be the first
+        fit's. Returns the thread, or None."""
+        w = np.zeros(self.n_padded)
+        w[: self.n] = weights
+        rows, w = self._fit_rows(w)
+        free = self.mask(active)
+        cols, n_cols = self._fit_cols(free)
+        return engine_ahead(*self._args(self.null, active, free, rows, w, np.inf, 0, cols, n_cols))
 
     def _fit(self, theta0, active, free, weights, huber_c, max_iter) -> np.ndarray:
         theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
