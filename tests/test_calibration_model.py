@@ -223,3 +223,23 @@ def test_a_program_compiled_ahead_on_a_thread_is_the_one_the_fits_run():
                            np.r_[w, np.zeros(118)], np.inf, 4, *pb._fit_cols(pb.mask(active)))
     ref = jax.jit(partial(_problem._engine, spec), compiler_options=_problem.fast_compile_options())(*args)
     np.testing.assert_array_equal(theta, np.asarray(ref[0]))
+
+
+def test_the_runner_compiles_the_final_refits_program_ahead_without_workers(monkeypatch):
+    from tension_zones.calibration import _fits
+
+    monkeypatch.setattr(_fits, "spare_core", lambda: True)  # (a one-core machine compiles nothing ahead)
+    data = _data(1000, 3, seed=6)  # 1024 padded rows: fits on 640 of them, the final refit on all
+    pb = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, nominal("base") + library("base"))
+    train = np.arange(1000) < 600
+    fits = _fits.Fits(pb, train, ~train)
+    active = ["backbone_EI", "backlash"]
+    with _fits.Runner(fits, 0, warm={"final": (active, "all"), "other": (active, "train")}) as run:
+        fits.fit(pb.null, active, max_iter=1)  # the training fits' program (640 rows)
+        before = compilations()
+        run.ahead("final")
+        run.ahead("nothing")  # (not a warm-up program: ignored)
+        assert len(run._threads) == 1 and compilations() == before + 1
+        theta, _ = run.map("refit_all", [(pb.null, active, False)])[0]
+        assert compilations() == before + 1 and np.all(np.isfinite(theta))
+    assert run._threads == []  # joined on leaving

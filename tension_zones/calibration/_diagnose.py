@@ -127,7 +127,18 @@ def _knn(X: np.ndarray, k: int, rng) -> np.ndarray:
     np.fill_diagonal(d2, np.inf)
     # ties (e.g. all unloaded samples) broken at random, not by index: an index order would smuggle
     # the acquisition order into another feature
-    return np.argsort(d2 + 1e-12 * rng.random(d2.shape), axis=1)[:, :k]
+    # (the k nearest in any order: the smoother averages them)
+    return np.argpartition(d2 + 1e-12 * rng.random(d2.shape), k - 1, axis=1)[:, :k]
+
+
+def _loo_sse(rr: np.ndarray, nb: np.ndarray):
+    """Sum of squared leave-one-out k-NN smoother residuals of ``rr`` (..., M, 3), ``nb`` (M, k) each
+    sample's neighbours (themselves excluded): (...). The neighbours are summed a column at a time
+    (a (..., M, k, 3) gather costs several times more memory traffic)."""
+    smooth = np.zeros_like(rr)
+    for j in range(nb.shape[1]):
+        smooth += rr[..., nb[:, j], :]
+    return np.sum((rr - smooth / nb.shape[1]) ** 2, axis=(-2, -1))
 
 
 def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: int = 1000,
@@ -149,12 +160,14 @@ def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: in
     r = r - r.mean(axis=0)
     total = np.sum(r**2)
     perms = np.stack([rng.permutation(m) for _ in range(n_perm)])
+    # the shuffles' statistics in batches of about 2**20 residual values (NumPy calls per batch instead
+    # of per shuffle)
+    batch = max(1, 2**20 // (m * 3))
     out = {}
     for name, x in feats.items():
         nb = _knn(_embed(name, x), k, rng)
-        loo = lambda rr: np.sum((rr - rr[nb].mean(axis=1)) ** 2)  # noqa: E731
-        stat = loo(r)
-        null = np.array([loo(r[p]) for p in perms])
+        stat = _loo_sse(r, nb)
+        null = np.concatenate([_loo_sse(r[perms[i:i + batch]], nb) for i in range(0, n_perm, batch)])
         sd = max(float(np.std(null)), 1e-300)
         out[name] = {"explained": float(1.0 - stat / total), "z": float((np.mean(null) - stat) / sd)}
     mean = resid.mean(axis=0)

@@ -26,8 +26,10 @@ program instead of compiling its own (on this 2-core machine a compile takes 10-
 worker (a small recording), a spare core still compiles the rod's program where the first round will
 score it for sure (the model carries a load from the start): the main process traces and lowers it,
 then XLA compiles it on a thread (:meth:`Problem.compile_ahead`) while the main process traces,
-compiles and fits the constant-curvature model. The 500-sample ``unknown_a_3w`` set with an empty
-cache, one run after the other: 12.24-12.50 s -> 10.82-10.91 s wall.
+compiles and fits the constant-curvature model (the 500-sample ``unknown_a_3w`` set with an empty
+cache, one run after the other: 12.24-12.50 s -> 10.82-10.91 s wall). Likewise the final refit's
+program, once the first fit has run, where it is another (:meth:`Runner.ahead`). Only programs the
+loop will run: a compile still running at the end is waited for.
 
 **Where workers are started.** Python's ``spawn`` starts a worker by importing the calling program's
 main module again: a script whose top level calls :func:`calibrate` without an
@@ -212,8 +214,8 @@ class Runner:
     worker compiles first, in this order (:meth:`Fits.warm`). Use as a context manager (the workers
     end with it)."""
 
-    def __init__(self, fits: Fits, workers: int = 0, problem_args=None, warm=None, ahead=()):
-        self.fits, self.pool, self._warm, self._threads = fits, None, {}, []
+    def __init__(self, fits: Fits, workers: int = 0, problem_args=None, warm=None):
+        self.fits, self.pool, self._warm, self._threads, self._programs = fits, None, {}, [], dict(warm or {})
         if workers > 0:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
@@ -223,8 +225,6 @@ class Runner:
                 initargs=(problem_args, fits.train, fits.held, fits.robust))
             self._warm = {k: self.pool.submit(_job, "warm", None, (list(a), part))
                           for k, (a, part) in (warm or {}).items()}
-        else:  # no worker: the programs named in ``ahead`` compile on a thread (see the module)
-            self._threads = [t for k in ahead if (t := fits.ahead(list(warm[k][0]), warm[k][1])) is not None]
 
     def __enter__(self):
         return self
@@ -239,6 +239,15 @@ class Runner:
         if self.pool is not None:
             self.pool.shutdown(wait=False, cancel_futures=True)
             self.pool = None
+
+    def ahead(self, name: str) -> None:
+        """Without workers, on a machine with a spare core: start compiling the program ``name`` of
+        ``warm`` on a thread now (:meth:`Fits.ahead`; the loop asks only for programs it will run).
+        With workers, the workers' warm-up does it."""
+        if self.pool is None and spare_core() and name in self._programs:
+            active, part = self._programs[name]
+            if (t := self.fits.ahead(list(active), part)) is not None:
+                self._threads.append(t)
 
     def warmed(self, name: str) -> None:
         """Before the main process first runs the program ``name`` of ``warm``: where a worker is

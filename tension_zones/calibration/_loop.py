@@ -54,7 +54,7 @@ from ..model import Design, Robot
 from ._baselines import baselines
 from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
-from ._fits import Fits, Runner, glitch_weights, rmse, spare_core, worker_count
+from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel
 from ._problem import Problem, correlations, parameter_std, physical
 from .effects import library as default_library
@@ -225,13 +225,16 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     rod = [b.name for b in library if getattr(b, "pieces", 1) > 1]
     warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
     warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
-    # without a worker, a spare core compiles the rod's program on a thread where the first round will
-    # score it for sure (the model carries a load from the start: known tip forces, a declared weight)
-    ahead = ["rod"] if rod and not n_workers and spare_core() and pb.loaded(theta_decl, nominal_names) else []
     with Runner(fits, n_workers,
-                (model, robot, full, tuple(nominal) + tuple(library)), warm, ahead) as run:
+                (model, robot, full, tuple(nominal) + tuple(library)), warm) as run:
+        # without a worker, a spare core compiles on a thread what the loop will run: the rod's program
+        # where the first round scores it for sure (the model carries a load from the start: known tip
+        # forces, a declared weight), the final refit's once the first fit has fixed the fits' rows
+        if rod and pb.loaded(theta_decl, nominal_names):
+            run.ahead("rod")
         active = list(nominal_names)
         theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
+        run.ahead("final")
         theta_before = theta.copy()
         r_decl = pb.residuals(theta_decl, [])  # after the first fit: in its program (Problem._evaluate)
         if noise is None:
