@@ -215,7 +215,7 @@ class Runner:
     end with it)."""
 
     def __init__(self, fits: Fits, workers: int = 0, problem_args=None, warm=None):
-        self.fits, self.pool, self._warm, self._threads, self._programs = fits, None, {}, [], dict(warm or {})
+        self.fits, self.pool, self._warm, self._threads, self._warm_args = fits, None, {}, [], dict(warm or {})
         if workers > 0:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
@@ -244,8 +244,8 @@ class Runner:
         """Without workers, on a machine with a spare core: start compiling the program ``name`` of
         ``warm`` on a thread now (:meth:`Fits.ahead`; the loop asks only for programs it will run).
         With workers, the workers' warm-up does it."""
-        if self.pool is None and spare_core() and name in self._programs:
-            active, part = self._programs[name]
+        if self.pool is None and spare_core() and name in self._warm_args:
+            active, part = self._warm_args[name]
             if (t := self.fits.ahead(list(active), part)) is not None:
                 self._threads.append(t)
 

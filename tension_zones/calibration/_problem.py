@@ -147,10 +147,7 @@ def engine_ahead(spec, *args) -> threading.Thread | None:
     key = _key(spec, args)
     if key in _PROGRAMS:
         return None
-    fn = _program(spec, args)
-    if not hasattr(fn, "lower"):
-        _PROGRAMS[key] = fn
-        return None
+    fn = _program(spec, args)  # (a jitted function either way: stored or traced as usual)
     lowered = fn.lower(*args)
     fut = _PROGRAMS[key] = Future()
 
