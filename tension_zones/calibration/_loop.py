@@ -23,8 +23,10 @@ For any robot (one segment or many) and any reader:
    part of almost anything, the true effect all of it). Then a backward step: an earlier effect
    whose removal no longer raises the held-out error significantly (same test) was only standing in
    for the new one, and is removed.
-4. Repeat until no candidate helps; test the final held-out residual for structure left; report the
-   error before and after. A validation file is only predicted, after every decision: its samples
+4. Repeat until no candidate helps (where no score is significant but the held-out error is clearly
+   above the noise floor, the best four scores get a second look: short refits, then the tests above,
+   with at least ``SECOND_LOOK_SHARE`` of the excess to explain: a score is first order); test the final
+   held-out residual for structure left; report the error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
    before the selection is over.
 5. Refit the chosen model on every sample of the data file, the held-out part too (the hold-out has
@@ -68,6 +70,12 @@ EXCESS_RATIO = 1.15
 #: significant, each first gets a short refit (``SCREEN_ITERATIONS``) and the best of those that
 #: lowered the held-out error go on.
 TRIES_PER_ROUND = 4
+#: A candidate refitted on a second look (no score significant, the held-out error clearly above the
+#: noise floor: see the loop) must explain at least this share of the held-out mean square's excess
+#: over the floor: the bulk of what is missing (the rod beside a preload: 97 %), not a part of a large
+#: residual, which is what structure from outside the library lets a flexible effect explain (a 1 mm
+#: tracker drift: 12 % by a preload).
+SECOND_LOOK_SHARE = 0.5
 #: A candidate must explain ``min_excess`` of the held-out mean square's excess over the noise floor
 #: while the model is within this many noise floors of it, and a share falling as ``1 / ratio``
 #: beyond: far above the noise the excess is the sum of many missing effects, and one real effect
@@ -172,6 +180,20 @@ def rmse_aligned(r) -> float:
     """RMSE after removing the mean offset (the metric the OpenCR lab reports)."""
     r = np.asarray(r)
     return rmse(r - r.mean(axis=0))
+
+
+def _excess(plain: float, err: float, noise: dict, m: int) -> dict:
+    """The held-out error (plain RMSE ``plain``, the decisions' ``err``; ``m`` samples) against the noise
+    floor: their ratio, and the mean square's log-ratio as an F-type z-value, since the floor is itself
+    estimated (from ``noise["pairs"]`` pairs of three axes) and can be off by chance."""
+    log_ratio = math.log(err**2 / (noise["floor_mm"] ** 2))
+    sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
+    return {"ratio_to_floor": plain / noise["floor_mm"], "z": log_ratio / sd}
+
+
+def _above_noise(excess: dict) -> bool:
+    """Whether an :func:`_excess` is clearly more than noise."""
+    return excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z
 
 
 def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None, library=None, nominal=None,
@@ -290,10 +312,22 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             m, m_train = int(held.sum()), int(train.sum())
             plain_start = plain
             significant = [s for s in scores if s["score"] > z_crit]
+            # the score test is first order: an effect whose parameters act nonlinearly once the others
+            # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
+            # critical 3.1, held-out 0.240 -> 0.082 mm, the noise floor, after a short refit) can explain
+            # far more than its score says. Where no score is significant but the held-out error is
+            # clearly above the noise floor (the final flag's test), the best-scoring candidates get a
+            # short refit each, and the refits' tests below decide, with a larger share of the excess
+            # to explain (``SECOND_LOOK_SHARE``)
+            second_look = not significant and _above_noise(_excess(plain, err, noise, m))
+            if second_look:
+                significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s][:TRIES_PER_ROUND]
+                for s in significant:
+                    s["second_look"] = True
             # held-out SSE drops are in units of the per-axis variance of the current residual (at least
             # the noise): structure the model lacks must not make a chance improvement look significant
             unit = max(float(np.mean(sigma**2)), err**2 / 3.0)
-            if len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
+            if second_look or len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
                     getattr(blocks[s["name"]], "pieces", 1) > 1 for s in significant)):
                 # screen: a short refit of every significant candidate, then the full refits of the best
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
@@ -327,7 +361,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 share, share_train = _shares(err, err_new, tr0, tr1, noise["floor_mm"])
                 ok = (drop > need and err_new < (1.0 - min_gain) * err
                       and share >= min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
-                      and drop_train > need)
+                      and drop_train > need
+                      and (not s.get("second_look") or share >= SECOND_LOOK_SHARE))
                 tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
                               "share_held_out": share, "share_train": share_train, "sse_drop": drop,
                               "sse_drop_train": drop_train,
@@ -392,15 +427,11 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
             e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
         corr = correlations(J_final, free, w_all, pb.labels(active))
-        # the held-out mean square against the noise estimate: an F-type comparison, since the floor is
-        # itself estimated (from noise["pairs"] pairs of three axes) and can be off by chance
-        log_ratio = math.log(err_after**2 / (noise["floor_mm"] ** 2))
-        sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
-        excess = {"ratio_to_floor": plain_after / noise["floor_mm"], "z": log_ratio / sd}
-        structure["excess_over_noise"] = excess
+        # the held-out mean square against the noise estimate
+        excess = structure["excess_over_noise"] = _excess(plain_after, err_after, noise, m)
         unexplained = bool(
             any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
-            or (excess["ratio_to_floor"] > EXCESS_RATIO and excess["z"] > STRUCTURE_Z)
+            or _above_noise(excess)
         )
         rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
                   "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from ._fits import SCREEN_ITERATIONS
-from ._loop import EXCESS_RATIO, STRUCTURE_Z, Result
+from ._loop import EXCESS_RATIO, SECOND_LOOK_SHARE, STRUCTURE_Z, Result
 
 PLOTS = {
     "bending_direction": "residual_vs_bending_direction.png",
@@ -218,6 +218,10 @@ def markdown(report: dict) -> str:
                                  else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
         lines.append("")
         screened = [c for c in sc if "screened_rmse_mm" in c]
+        if any(c.get("second_look") for c in sc):
+            lines.append("- no score significant, the held-out error clearly above the noise floor: a second "
+                         "look, short refits of the best-scoring candidates (a score is first order); one is "
+                         f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess")
         if screened:
             lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
                          f"{rd['rmse_held_out_mm']:.4f} mm): "
