@@ -165,3 +165,17 @@ def test_pairs_of_effects_are_both_named(tmp_path, pair):
     assert sorted(names(rep)) == sorted(pair)
     floor = rep["noise_floor_mm"]
     assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
+
+
+def test_a_round_with_nothing_to_score_ends_the_loop_cleanly(tmp_path):
+    """The variable curvature alone on a robot without a load: the first round has nothing to score
+    (the rod is the constant-curvature robot then). The report is the nominal fit's; this ended in an
+    UnboundLocalError (the held-out count was set inside the round)."""
+    from tension_zones.calibration.effects import BY_NAME
+
+    train_csv, _, design = write_robot_set(tmp_path, "noload", RobotTruth(), seed=5, steps=6)
+    robot = tz.Robot.from_json(design)
+    rep = calibrate(read_opencr(train_csv, n_wires=robot.n_wires), robot,
+                    library=(BY_NAME["variable_curvature"],)).to_json()
+    assert names(rep) == [] and rep["rounds"] == [] and not rep["unexplained_structure"]
+    assert rep["rmse_after_mm"] == rep["rmse_before_mm"] < 1.3 * rep["noise_floor_mm"]

@@ -219,7 +219,7 @@ def markdown(report: dict) -> str:
         lines.append("")
         screened = [c for c in sc if "screened_rmse_mm" in c]
         if any(c.get("second_look") for c in sc):
-            lines.append("- no score significant, the held-out error clearly above the noise floor: a second "
+            lines.append("- no score significant, the held-out residual above the noise floor and not noise: a second "
                          "look, short refits of the best-scoring candidates (a score is first order); one is "
                          f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess")
         if screened:
