@@ -138,7 +138,7 @@ def test_a_rod_under_its_weight_is_named_variable_curvature_not_geometry(tmp_pat
 @pytest.mark.slow
 def test_a_rod_beside_a_preload_is_named_on_a_second_look(tmp_path):
     """A rod under its weight with preload offsets: once the weight and the preload are in, the
-    variable curvature's first-order score (3.0) falls short of the round's critical value (3.1) while
+    variable curvature's first-order score (3.0) falls short of the round's critical value (3.7) while
     a refit of it takes the held-out error from about 3x the noise floor to the floor. Where no score
     is significant and the held-out error is clearly above the noise, the loop refits the best-scoring
     candidates (a second look), and keeps one that explains the bulk of what is left."""

@@ -73,7 +73,7 @@ EXCESS_RATIO = 1.15
 TRIES_PER_ROUND = 4
 #: A candidate refitted on a second look (no score significant, the held-out residual above the noise
 #: floor and not noise: see the loop) must explain at least this share of the held-out mean square's excess
-#: over the floor: the bulk of what is missing (the rod beside a preload: 97 %), not a part of a large
+#: over the floor: the bulk of what is missing (the rod beside a preload: 100 %), not a part of a large
 #: residual, which is what structure from outside the library lets a flexible effect explain (a 1 mm
 #: tracker drift: 12 % by a preload).
 SECOND_LOOK_SHARE = 0.5
@@ -322,7 +322,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             significant = [s for s in scores if s["score"] > z_crit]
             # the score test is first order: an effect whose parameters act nonlinearly once the others
             # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
-            # critical 3.1, held-out 0.240 -> 0.082 mm, the noise floor, after a short refit) can explain
+            # critical 3.7, held-out 0.240 -> 0.082 mm, the noise floor, after a short refit) can explain
             # far more than its score says. Where no score is significant but the held-out error is more
             # than ``EXCESS_RATIO`` times the noise floor and its residual not noise (the final flag's
             # test: structure along an input, an offset, or a clear excess), the best-scoring candidates
