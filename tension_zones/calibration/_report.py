@@ -236,6 +236,19 @@ def markdown(report: dict) -> str:
                          f"{t['needed']:.1f})"
                          + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
                          + f" -> {verdict}")
+        la = rd.get("look_ahead")
+        if la:
+            a, b = la["branches"]
+            line = (f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
+                    f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} it ends "
+                    f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; ")
+            if "behind_after_round" in b:
+                line += (f"with {b['first']} it was behind after round {b['behind_after_round']} "
+                         f"({b['rmse_held_out_mm']:.4f} mm) and was given up")
+            else:
+                line += (f"with {b['first']}, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
+                         f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
+            lines.append(line + f" -> the branch of **{la['kept']}** is kept")
         for t in rd.get("removed", []):
             lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
                          f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
