@@ -10,7 +10,7 @@ import json
 
 import numpy as np
 import pytest
-from simulator import RobotTruth, write_robot_set
+from simulator import ROBOT, RobotTruth, write_robot_set
 
 import tension_zones as tz
 from tension_zones.calibration import calibrate, compilations, read_opencr
@@ -177,6 +177,23 @@ def test_a_near_tie_is_decided_by_looking_ahead(tmp_path):
     # report.md says what each branch came to, in the round of the tie
     md = markdown({**rep, "validate": "rod_backlash_val.csv", "plots": []})
     assert "(look-ahead)" in md and "the branch of **gravity** is kept" in md
+
+
+@pytest.mark.slow
+def test_a_single_rod_segment_under_its_weight_is_named_a_rod(tmp_path):
+    """One segment (the robot's second alone, 300 samples) bending as a rod under its weight. The rod's
+    refit starts from the elastic rod (``VariableCurvature.start``): from constant curvature its short
+    refit stayed where it was (0.1274 mm held out; the solver held the curvature freedom on its bound
+    while the other parameters moved), a marker offset was named instead, and the rod never was. Which
+    load explains the sag is a tie this recording cannot decide (a tip force or the weight, held out
+    0.1271 against 0.1272 mm): either is accepted here."""
+    truth = RobotTruth(design={"segments": [dict(ROBOT["segments"][1])]}, pattern_rotation_deg=(12.0,),
+                       EI_factors=(1.1,), gravity=(0.0, 0.003, -0.004), pieces=6)
+    rep = run(tmp_path, "rod_one", truth, steps=14)
+    got = names(rep)
+    assert "variable_curvature" in got and len(got) == 2 and got[0] in ("gravity", "tip_force")
+    floor = rep["noise_floor_mm"]
+    assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
 
 
 @pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload")])

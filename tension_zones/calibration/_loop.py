@@ -377,7 +377,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # screen: a short refit of every significant candidate, then the full refits of the best
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
                 # as much as several of the others')
-                jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in significant]
+                jobs = [(_with(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in significant]
                 for s, e in zip(significant, run.map("screen", jobs)):
                     s["screened_rmse_mm"] = e
                 say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
@@ -394,7 +394,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 significant = sorted((s for s in significant if not s["screened_out"]),
                                      key=lambda s: s["screened_rmse_mm"])
             chosen = significant[:TRIES_PER_ROUND]
-            jobs = [(_without(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in chosen]
+            jobs = [(_with(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in chosen]
             for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs)):
                 drop = (err**2 - err_new**2) * m / unit
                 need = chi2_quantile(alpha, max(s["dof"], 1))
@@ -569,6 +569,13 @@ def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
         return (a**2 - b**2) / excess if excess > 0 else 0.0
 
     return share(held0, held1), share(train0, train1)
+
+
+def _with(pb: Problem, theta, block: slice) -> np.ndarray:
+    """A copy of ``theta`` with one block's parameters at their refit start (``Effect.start``)."""
+    th = np.array(theta, float)
+    th[block] = pb.start[block]
+    return th
 
 
 def _without(pb: Problem, theta, block: slice) -> np.ndarray:

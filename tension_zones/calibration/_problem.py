@@ -240,6 +240,7 @@ class Problem:
         self.y = jnp.asarray(padded.p)
         self.n_padded = padded.n_samples
         self.null = np.concatenate([b.null(model, phys_np) for b in blocks])
+        self.start = np.concatenate([b.start(model, phys_np) for b in blocks])  # a refit's, per effect
         self.lo = np.concatenate([b.bounds(model, phys_np)[0] for b in blocks])
         self.hi = np.concatenate([b.bounds(model, phys_np)[1] for b in blocks])
         self._phys_np = phys_np

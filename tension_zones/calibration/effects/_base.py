@@ -47,6 +47,10 @@ class Effect:
     def null(self, model, phys0) -> np.ndarray:
         return np.zeros(self.size(model, phys0))
 
+    def start(self, model, phys0) -> np.ndarray:
+        """Where a refit that adds the effect starts (default: ``null``, where it was scored)."""
+        return self.null(model, phys0)
+
     def bounds(self, model, phys0) -> tuple[np.ndarray, np.ndarray]:
         n = self.size(model, phys0)
         return np.full(n, -np.inf), np.full(n, np.inf)
