@@ -29,8 +29,9 @@ For any robot (one segment or many) and any reader:
    explain: a score is first order); test the final held-out residual for structure left. Where it
    has structure left and a round kept one of two refits the test cannot tell apart (held-out sums
    of squares within the chi-square quantile of one parameter), a *look-ahead*: the loop goes on
-   from that round's runner-up (the earliest such round's) as well, and the runner-up's branch is
-   kept if it ends with a held-out sum of squares lower by more than that quantile. Report the
+   from that round's runner-up (the earliest such round's) as well; that branch is given up as soon
+   as its held-out error is above the first branch's after the same round, and kept if it ends with
+   a held-out sum of squares lower by more than that quantile. Report the
    error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
    before the selection is over.
