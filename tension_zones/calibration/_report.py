@@ -228,25 +228,27 @@ def markdown(report: dict) -> str:
                          + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
                                      + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
                                      for c in screened))
+        la = rd.get("look_ahead")
         for t in rd["tried"]:
             verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
                                                     else "not significant")
+            if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
+                verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
             lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
                          f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
                          f"{t['needed']:.1f})"
                          + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
                          + f" -> {verdict}")
-        la = rd.get("look_ahead")
         if la:
             a, b = la["branches"]
             line = (f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
-                    f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} it ends "
+                    f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} first it ends "
                     f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; ")
             if "behind_after_round" in b:
-                line += (f"with {b['first']} it was behind after round {b['behind_after_round']} "
+                line += (f"with {b['first']} first it was behind after round {b['behind_after_round']} "
                          f"({b['rmse_held_out_mm']:.4f} mm) and was given up")
             else:
-                line += (f"with {b['first']}, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
+                line += (f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
                          f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
             lines.append(line + f" -> the branch of **{la['kept']}** is kept")
         for t in rd.get("removed", []):
