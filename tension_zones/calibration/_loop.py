@@ -378,7 +378,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # screen: a short refit of every significant candidate, then the full refits of the best
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
                 # as much as several of the others')
-                jobs = [(_with(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in significant]
+                jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in significant]
                 for s, e in zip(significant, run.map("screen", jobs)):
                     s["screened_rmse_mm"] = e
                 say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
@@ -395,7 +395,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 significant = sorted((s for s in significant if not s["screened_out"]),
                                      key=lambda s: s["screened_rmse_mm"])
             chosen = significant[:TRIES_PER_ROUND]
-            jobs = [(_with(pb, theta, sl[s["name"]]), active + [s["name"]]) for s in chosen]
+            jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
             for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs)):
                 drop = (err**2 - err_new**2) * m / unit
                 need = chi2_quantile(alpha, max(s["dof"], 1))
@@ -436,7 +436,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # backward step: an earlier effect that only stood in for the one just added goes
                 # (the refits without each earlier effect run at once; the first that passes is taken)
                 earlier = [e for e in st.effects if e["name"] != accepted["name"]]
-                jobs = [(_without(pb, st.theta, sl[e["name"]]), [a for a in st.active if a != e["name"]])
+                jobs = [(_reset(st.theta, sl[e["name"]], pb.null), [a for a in st.active if a != e["name"]])
                         for e in earlier]
                 for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, run.map("refit_held_only", jobs)):
                     rise = (err_wo**2 - st.err**2) * m / unit_of(st.err)
@@ -529,7 +529,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
             e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
         corr = correlations(J_final, free, w_all, pb.labels(active))
-        # the held-out mean square against the noise estimate
+        # structure left, or the held-out error clearly above the noise floor (``ending``: ``_excess``)
         unexplained = _flagged(structure)
         rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
                   "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}
@@ -572,17 +572,11 @@ def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
     return share(held0, held1), share(train0, train1)
 
 
-def _with(pb: Problem, theta, block: slice) -> np.ndarray:
-    """A copy of ``theta`` with one block's parameters at their refit start (``Effect.start``)."""
+def _reset(theta, block: slice, values) -> np.ndarray:
+    """A copy of ``theta`` with one block's parameters set from ``values`` (P,): ``Problem.start`` for a
+    refit that adds the block's effect, ``Problem.null`` for one that removes it."""
     th = np.array(theta, float)
-    th[block] = pb.start[block]
-    return th
-
-
-def _without(pb: Problem, theta, block: slice) -> np.ndarray:
-    """A copy of ``theta`` with one block's parameters at their null values (a refit's start)."""
-    th = np.array(theta, float)
-    th[block] = pb.null[block]
+    th[block] = values[block]
     return th
 
 
