@@ -137,6 +137,19 @@ def test_a_rod_under_its_weight_is_named_variable_curvature_not_geometry(tmp_pat
 
 
 @pytest.mark.slow
+def test_a_rod_under_a_tip_force_is_named_and_fitted_to_the_noise(tmp_path):
+    """A two-segment rod under a lateral tip force, the generator's segments in 12 pieces (nearer the
+    continuous rod than the calibration's): with 4 pieces per segment the calibration's rod named the
+    tip force and the rod but ended at 1.20x the floor, with structure left (flagged); with 6 (two
+    segments: ``VariableCurvature.pieces_for``) it reaches the floor, and nothing is left."""
+    rep = run(tmp_path, "rod_force", RobotTruth(tip_force=(0.3, -0.2, -0.4), pieces=12), seed=4, steps=6)
+    assert sorted(names(rep)) == ["tip_force", "variable_curvature"]
+    floor = rep["noise_floor_mm"]
+    assert rep["rmse_after_mm"] < 1.15 * floor and rep["rmse_validate_mm"] < 1.15 * floor
+    assert not rep["unexplained_structure"]
+
+
+@pytest.mark.slow
 def test_a_rod_beside_a_preload_is_named_on_a_second_look(tmp_path):
     """A rod under its weight with preload offsets: once the weight and the preload are in, the
     variable curvature's first-order score (3.0) falls short of the round's critical value (3.7) while

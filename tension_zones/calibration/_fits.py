@@ -17,7 +17,7 @@ bit the ones of a run without workers: the same program on the same inputs, and 
 look at the list's results in the list's order.
 
 **Warm-up.** A worker's first job is to compile the programs the loop may need: the rod's (the
-variable-curvature effect's, ``Effect.pieces``) first, then the constant-curvature one (which the main
+variable-curvature effect's, ``Effect.pieces_for``) first, then the constant-curvature one (which the main
 process compiles meanwhile: with the cache on, the worker loads it), then the final refit's on every
 sample (where the loop's fits run on their own rows, :meth:`Problem._fit_rows`). With the compilation
 cache on (``tension_zones._xla``), before the main process first runs the rod or the final refit it

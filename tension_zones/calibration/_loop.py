@@ -272,7 +272,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     fit, held_error, decision_error = fits.fit, fits.held_error, fits.decision_error
     # the workers compile the rod's program first (the main process needs it last), then the model's,
     # then the final refit's
-    rod = [b.name for b in library if getattr(b, "pieces", 1) > 1]
+    rod = [b.name for b in library if b.pieces_for(model) > 1]
     warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
     warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
     with Runner(fits, n_workers,
@@ -363,8 +363,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # test: structure along an input, an offset, or a clear excess), the best-scoring candidates
             # get a short refit each, and the refits' tests below decide, with a larger share of the
             # excess to explain (``SECOND_LOOK_SHARE``). (Closer to the floor, what is left is too little
-            # to name: a rod of four pieces fitted to one of six left 1.05x the floor and structure that a
-            # geometry change took half of.)
+            # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
+            # structure that a geometry change took half of: the model's own discretisation.)
             excess = _excess(plain, err, noise, m)
             second_look = (not significant and excess["ratio_to_floor"] > EXCESS_RATIO
                            and _flagged({**structure_test(r[held], held_feats, sigma), "excess_over_noise": excess}))
@@ -374,7 +374,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                     s["second_look"] = True
             unit = unit_of(err)
             if second_look or len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
-                    getattr(blocks[s["name"]], "pieces", 1) > 1 for s in significant)):
+                    blocks[s["name"]].pieces_for(model) > 1 for s in significant)):
                 # screen: a short refit of every significant candidate, then the full refits of the best
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
                 # as much as several of the others')

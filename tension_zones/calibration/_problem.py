@@ -5,7 +5,7 @@ tip. Every block (nominal parameters and every candidate) is always present in t
 a 0/1 mask over the parameter vector says which are free and a 0/1 per block which are part of the
 model being evaluated; the rest stay at their null values. So one compilation serves the whole loop:
 new values, another active set or another data set of similar size never recompile. An effect that
-needs the segments in pieces (``Effect.pieces``, the rod model) runs, while it is on, a second
+needs the segments in pieces (``Effect.pieces_for``, the rod model) runs, while it is on, a second
 program: the model's ``with_pieces`` variant, compiled the first time it is used and never again, so
 a calibration that never needs the rod never pays for it.
 """
@@ -249,8 +249,8 @@ class Problem:
 
     def spec_for(self, active) -> Spec:
         """The program for the model made of ``active``: the model itself, or its variant in pieces
-        where an active block needs them (``Effect.pieces``; the parameter vector is the same)."""
-        pieces = max((getattr(b, "pieces", 1) for b in self.spec.blocks if b.name in active), default=1)
+        where an active block needs them (``Effect.pieces_for``; the parameter vector is the same)."""
+        pieces = max((b.pieces_for(self.model) for b in self.spec.blocks if b.name in active), default=1)
         own = getattr(getattr(self.model, "structure", None), "pieces", 1)
         if pieces <= own or not hasattr(self.model, "with_pieces"):
             return self.spec

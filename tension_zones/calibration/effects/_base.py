@@ -33,9 +33,6 @@ class Effect:
     #: True for an effect that switches the model's solver when it is on (its parameters have no
     #: sensitivity while it is off): the score test then evaluates the Jacobian with it on, at null
     scored_on = False
-    #: segments in this many constant-curvature pieces while the effect is on (the rod model): the
-    #: calibration then runs a second program, the model's ``with_pieces`` variant
-    pieces = 1
     #: True for an effect with no sensitivity unless the model carries a load (tip force or weight):
     #: the loop does not score it while the model has none (its score would be exactly 0)
     needs_load = False
@@ -46,6 +43,12 @@ class Effect:
 
     def null(self, model, phys0) -> np.ndarray:
         return np.zeros(self.size(model, phys0))
+
+    def pieces_for(self, model) -> int:
+        """Constant-curvature pieces per segment that ``model`` needs while the effect is on (the rod
+        model); 1: none. More than 1: the calibration then runs a second program, the model's
+        ``with_pieces`` variant."""
+        return 1
 
     def start(self, model, phys0) -> np.ndarray:
         """Where a refit that adds the effect starts (default: ``null``, where it was scored)."""

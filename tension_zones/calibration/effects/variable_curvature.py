@@ -25,15 +25,20 @@ class VariableCurvature(Effect):
     name = "variable_curvature"
     doc = ("curvature varying along each segment as in an elastic rod under the loads (0 = constant "
            "curvature, 1 = elastic rod)")
-    #: the calibration model solves each segment as this many constant-curvature pieces when this
-    #: effect is among its candidates (tip error against the rod for a bent 60 mm segment: 0.04 mm
-    #: under a lateral weight of 0.003 N/mm, 0.2 mm with a 0.4 N lateral tip force; model/README.md)
-    pieces = 4
     scored_on = True
     needs_load = True
 
     def size(self, model, phys0):
         return model.structure.n_segments
+
+    def pieces_for(self, model):
+        # The tip error against the Kirchhoff rod (tests/reference_rod.py) of a bent 60 mm segment
+        # falls as 1/m^2: under a lateral weight of 0.003 N/mm 0.040 / 0.018 mm with m = 4 / 6, with a
+        # 0.4 N lateral tip force as well 0.20 / 0.090 mm (model/README.md), against a tracker's
+        # 0.05 mm. 6 pieces cost one and two segments little (a two-segment rod set's calibration
+        # 25.2 s either way, a 500-sample single-segment set's first run +0.2 s); three segments 4 (the
+        # FTDCR v4 calibration, which scores the rod every round, took 125 s with 6 instead of 90 s)
+        return 6 if model.structure.n_segments <= 2 else 4
 
     def bounds(self, model, phys0):
         n = self.size(model, phys0)
