@@ -36,7 +36,7 @@ class VariableCurvature(Effect):
         # falls as 1/m^2: under a lateral weight of 0.003 N/mm 0.040 / 0.018 mm with m = 4 / 6, with a
         # 0.4 N lateral tip force as well 0.20 / 0.090 mm (model/README.md), against a tracker's
         # 0.05 mm. 6 pieces cost one and two segments little (a two-segment rod set's calibration
-        # 25.2 s either way, a 500-sample single-segment set's first run +0.2 s); three segments 4 (the
+        # 25.2 s either way, a 500-sample single-segment set's first run +0.2-0.3 s); three segments 4 (the
         # FTDCR v4 calibration, which scores the rod every round, took 125 s with 6 instead of 90 s)
         return 6 if model.structure.n_segments <= 2 else 4
 
