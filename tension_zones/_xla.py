@@ -58,10 +58,12 @@ def _jaxlib_version() -> tuple:
         return (0,)
 
 
-def fast_compile_options() -> dict:
+def fast_compile_options(optimise: bool = True) -> dict:
     """XLA options for programs whose compile time outweighs their run time (the calibration's
     engine, the design optimiser, the paper's identification):
-    ``jax.jit(..., compiler_options=fast_compile_options())``.
+    ``jax.jit(..., compiler_options=fast_compile_options())``. ``optimise=False``: LLVM level 0 as
+    well, for a program that runs too little to pay for LLVM's optimisation (the caller measured it:
+    ``calibration/_problem.py``, ``_optimised``).
 
     XLA:CPU's MLIR fusion emitters (jaxlib 0.5.3 on; the first release with the switch) take much of
     the compile time of these large programs; the older emitters compile them faster and run them as
@@ -81,7 +83,7 @@ def fast_compile_options() -> dict:
     compiled in 6.8 / 8.0 s instead of 11.1 / 13.6 s, but its fits and evaluations ran 2.5 / 0.9 ->
     4.1 / 3.1 s, and the end-to-end calibration tests took 261 s instead of 230 s.
     """
-    opts = {_LLVM_LEVEL: 3}
+    opts = {_LLVM_LEVEL: 3 if optimise else 0}
     if _jaxlib_version() >= (0, 5, 3):
         opts[_FUSION] = False
     return opts

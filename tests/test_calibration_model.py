@@ -243,3 +243,29 @@ def test_the_runner_compiles_the_final_refits_program_ahead_without_workers(monk
         theta, _ = run.map("refit_all", [(pb.null, active, False)])[0]
         assert compilations() == before + 1 and np.all(np.isfinite(theta))
     assert run._threads == []  # joined on leaving
+
+
+def test_only_a_one_segment_rods_program_skips_llvms_optimisation_and_it_fits_the_same():
+    """The rod's program of a one-segment robot compiles at LLVM level 0 (it runs little: see
+    ``_problem._optimised``); every other program at 3. Its fit is the optimised program's."""
+    from functools import partial
+
+    from tension_zones.calibration import _problem
+
+    data = _data(40, 3, seed=7)
+    data = dataclasses.replace(data, f=np.random.default_rng(8).normal(0.0, 0.3, (40, 3)))  # a load: a rod
+    one = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), data, nominal("base") + library("base"))
+    two = Problem(RobotModel.of(TWO), TWO, _data(40, 7, seed=7), nominal("base") + library("base"))
+    rod = ["backbone_EI", "variable_curvature"]
+    assert one.spec_for(rod).model.structure.pieces > 1 and two.spec_for(rod).model.structure.pieces > 1
+    assert not _problem._optimised(one.spec_for(rod))
+    assert _problem._optimised(one.spec_for(["backbone_EI"])) and _problem._optimised(two.spec_for(rod))
+    assert _problem._optimised(two.spec_for(["backbone_EI"]))
+
+    w = np.ones(40)
+    theta = one.fit(one.null, rod, w, max_iter=6)
+    spec, *args = one._args(np.clip(one.null, one.lo, one.hi), rod, one.mask(rod), np.arange(one.n_padded),
+                            np.r_[w, np.zeros(one.n_padded - 40)], np.inf, 6, *one._fit_cols(one.mask(rod)))
+    ref = jax.jit(partial(_problem._engine, spec), compiler_options=_problem.fast_compile_options(True))(*args)
+    assert not np.allclose(theta, one.null)  # (it moved)
+    np.testing.assert_allclose(theta, np.asarray(ref[0]), rtol=1e-9, atol=1e-12)

@@ -53,6 +53,7 @@ def test_fast_compile_options_only_where_jaxlib_has_them_and_change_no_result(mo
                               ((0, 10, 2), {"xla_cpu_use_fusion_emitters": False})):
         monkeypatch.setattr(_xla, "_jaxlib_version", lambda v=version: v)
         assert _xla.fast_compile_options() == {**level, **expected}, version
+        assert _xla.fast_compile_options(optimise=False) == {**level, **expected, **{k: 0 for k in level}}
         assert _xla.fast_compile_flag() == "".join(f"--{k}=false" for k in expected), version
     monkeypatch.undo()
     assert len(_xla._jaxlib_version()) >= 2  # the installed jaxlib's version is read

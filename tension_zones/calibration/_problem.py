@@ -110,9 +110,29 @@ def _key(spec, args):
     return (spec, tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
 
 
+def _optimised(spec) -> bool:
+    """Whether the engine's program for ``spec`` is worth LLVM's optimisation (level 3, else 0).
+
+    Not the rod variant of a one-segment robot. The loop scores the rod in its first round (a few
+    short fits) and on one segment rarely fits it further; its program took 3.5 s to compile alone
+    (1.8 s at level 0), and 4.7-5.3 s beside the constant-curvature one, which waited for a core.
+    Measured on this 2-core machine with an empty cache, this program at level 0 against 3, every
+    result the same (the constant-curvature program at level 0 as well was slower on the larger sets):
+    * the CLI on the 500-sample ``unknown_a_3w`` set, from the process's start to the report written:
+      8.7 / 8.8 s against 10.3 / 10.3 s;
+    * ``calibrate`` with a validation file on sets of the tests' generator, one segment under its
+      weight (the truth of ``test_a_single_rod_segment_under_its_weight_is_named_a_rod``): 224, 992
+      and 1952 samples 8.2 / 11.5 / 14.8 s against 10.0 / 13.2 / 15.6 s; 480 samples, where the rod
+      was named and refitted, 13.1 / 12.9 s against 12.2 / 12.6 s.
+    Two segments keep level 3: on a 350-sample set whose rod is fitted (a tip force), 24.3 / 24.5 s
+    with the rod's program at level 0 against 18.2 / 18.4 s."""
+    structure = getattr(spec.model, "structure", None)
+    return not (getattr(structure, "pieces", 1) > 1 and getattr(structure, "n_segments", 0) == 1)
+
+
 def _program(spec, args):
     """The engine's program for ``spec`` and arguments like ``args`` (jitted, not yet compiled)."""
-    opts = fast_compile_options()
+    opts = fast_compile_options(_optimised(spec))
     fn = jax.jit(partial(_engine, spec), compiler_options=opts)
     classes = [type(spec.model)] + [type(b) for b in spec.blocks]
     if (outside := classes_digest(classes)) is not None:
