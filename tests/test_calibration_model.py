@@ -1,6 +1,7 @@
 """The calibration's model: effects as one parameter vector, path-dependent inputs, one compilation."""
 
 import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -107,7 +108,7 @@ def test_every_effect_is_defined_for_any_robot_and_null_means_none():
     sl = pb.spec.slices()
     names = [b.name for b in ALL]
     base = pb.predict(pb.null, names)
-    r, J = pb.jacobian(pb.null, names)
+    _r, J = pb.jacobian(pb.null, names)
     assert np.all(np.isfinite(J))
     # without the pattern rotation and the offset in the model the registration also turns about the
     # robot's axis and translates (with them, it leaves those to them: see effects/registration.py)
