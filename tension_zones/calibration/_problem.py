@@ -119,11 +119,12 @@ def _optimised(spec) -> bool:
     Measured on this 2-core machine with an empty cache, this program at level 0 against 3, every
     result the same (the constant-curvature program at level 0 as well was slower on the larger sets):
     * the CLI on the 500-sample ``unknown_a_3w`` set, from the process's start to the report written:
-      8.7 / 8.8 s against 10.3 / 10.3 s;
+      8.7 / 8.8 s against 10.3 / 10.3 s; with the cache filled 3.5-3.7 s against 3.3-3.4 s;
     * ``calibrate`` with a validation file on sets of the tests' generator, one segment under its
       weight (the truth of ``test_a_single_rod_segment_under_its_weight_is_named_a_rod``): 224, 992
-      and 1952 samples 8.2 / 11.5 / 14.8 s against 10.0 / 13.2 / 15.6 s; 480 samples, where the rod
-      was named and refitted, 13.1 / 12.9 s against 12.2 / 12.6 s.
+      and 1952 samples 8.2 / 11.5 / 14.8 s against 10.0 / 13.2 / 15.6 s. The price is paid where the
+      rod is named and refitted (480 samples): 12.5-13.1 s against 12.0-12.6 s, and with the cache
+      filled 6.3 / 6.4 s against 4.0 / 4.0 s.
     Two segments keep level 3: on a 350-sample set whose rod is fitted (a tip force), 24.3 / 24.5 s
     with the rod's program at level 0 against 18.2 / 18.4 s."""
     structure = getattr(spec.model, "structure", None)
