@@ -33,7 +33,7 @@ from tension_zones.calibration import calibrate
 from tension_zones.calibration._model import RobotModel
 from tension_zones.calibration.effects import library
 from tension_zones.calibration.effects._base import Effect, replace
-from tension_zones.model._equilibrium import routing_matrix
+from tension_zones.model._equilibrium import _guarded_norm, routing_matrix
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,7 +71,7 @@ class HoleClearance(Effect):
     def on_inputs(self, theta, inputs, model, on):
         q = inputs["q"]
         b = (q @ jnp.asarray(self.inverse).T).reshape(q.shape[0], -1, 2)  # (samples, S, 2)
-        n = jnp.sqrt(jnp.sum(b * b, axis=-1) + 1e-12)  # |theta| per segment (rad), smooth at 0
+        n = _guarded_norm(b)  # |theta| per segment (rad), a finite gradient at 0
         shift = theta[0] * n @ jnp.asarray(self.own).T + theta[1] * n @ jnp.asarray(self.prox).T
         return replace(inputs, q=q + shift)
 
