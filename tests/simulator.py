@@ -195,6 +195,7 @@ class RobotTruth:
     d_length: tuple = ()  # per segment, mm
     d_radius: tuple = ()  # per segment, mm
     twist_deg: tuple = ()  # per pair of neighbouring segments: turn of segment j's disks against j + 1's
+    clearance: tuple = (0.0, 0.0)  # mm per rad of bending: a wire's path shortened in its own segment, the ones before
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
     noise: float = 0.05
     pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
@@ -275,7 +276,19 @@ class _Robot:
                 a = self.alpha[k] + twist[j // m:self.owner[k]].sum()  # turned by the disks' twists on the way
                 self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(a), np.sin(a)])
         self.loaded = bool(np.any(self.f) or np.any(self.g))
+        # hole clearance: wire k's path shortened by C[k, j] |x_j| in every piece j it crosses
+        cl = np.asarray(truth.clearance, float)
+        self.C = np.zeros((self.N, self.S))
+        for k in range(self.N):
+            for j in range(self.crossed[k]):
+                self.C[k, j] = cl[0] if j // m == self.owner[k] else cl[1]
 
+    def stretch(self, x, q, short=None):
+        """Each wire's stretch (N,): the routing's length change, less the clearance's shortening
+        (``short``, frozen, or else at ``x``)."""
+        if short is None:
+            short = self.C @ np.hypot(*x.reshape(self.S, 2).T)
+        return self.A @ x - q + self.pre / self.k - short
 
     def chain(self, B):
         """Disk poses along the chain (lists of S + 1) and the weight's quadrature points."""
@@ -318,8 +331,10 @@ class _Robot:
             p, R = world[:, -1], R @ Rj
         return -(p @ self.f) - (M @ self.g)
 
-    def energy(self, x, q, t):
-        s = self.A @ x - q + self.pre / self.k
+    def energy(self, x, q, t, short=0.0):
+        """``V`` and its gradient with the clearance's shortening ``short`` frozen (the wires' moment
+        arms are the routing's ``A`` either way)."""
+        s = self.stretch(x, q, short)
         E = np.repeat(self.EI / self.L, 2)
         V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2)
         g = E * x + self.A.T @ (t * self.k * np.maximum(s, 0.0))
@@ -344,28 +359,31 @@ class _Robot:
     def force(self, x, q, direction):
         """The generalised force with friction (2S,): each wire's tension times its factor in every
         piece it crosses."""
-        _, g = self.energy(x, q, np.ones(self.N))  # backbone, load, and the wires at factor 1
-        tau = self.k * np.maximum(self.A @ x - q + self.pre / self.k, 0.0)
+        short = self.C @ np.hypot(*x.reshape(self.S, 2).T)
+        _, g = self.energy(x, q, np.ones(self.N), short)  # backbone, load, and the wires at factor 1
+        tau = self.k * np.maximum(self.stretch(x, q, short), 0.0)
         T = self.factors(x, direction)
         return g + (self.A * np.repeat(T - 1.0, 2, axis=1)).T @ tau
 
     def equilibrium(self, q, direction, x0):
-        """Friction is not conservative: the root of the force, found by MINPACK's hybrid method from
-        the frictionless minimum, or else by a fixed point of BFGS minimisations of the energy with each
-        wire's mean tension factor and, as a constant force, the rest of the friction force, both
-        updated from the solution until the force itself vanishes."""
+        """Friction and the clearance are not conservative: the root of the force, found by MINPACK's
+        hybrid method from the first minimum, or else by a fixed point of BFGS minimisations of the
+        energy with each wire's mean tension factor, the clearance's shortening and, as a constant
+        force, the rest of the friction force, all updated from the solution until the force itself
+        vanishes."""
         t, rest, x = np.ones(self.N), np.zeros(2 * self.S), x0
-        friction = bool(np.any(self.mu) and np.any(direction))
+        friction = bool(np.any(self.mu) and np.any(direction)) or bool(np.any(self.C))
         for it in range(100):
             # gtol 1e-6: the tip within 1e-6 mm of a 1e-10 solve (checked), at half the cost (1e-8 with
             # friction, whose fixed point needs the force to 1e-7); started from the elastic part's
             # inverse Hessian (backbone and taut wires): BFGS then needs only the load's curvature
-            s = self.A @ x - q + self.pre / self.k
+            short = self.C @ np.hypot(*x.reshape(self.S, 2).T)
+            s = self.stretch(x, q, short)
             H = np.diag(np.repeat(self.EI / self.L, 2)) + self.A.T @ ((t * self.k * (s > 0))[:, None] * self.A)
             Hi = np.linalg.inv(H)
 
-            def fun(y, t=t, rest=rest):
-                V, g = self.energy(y, q, t)
+            def fun(y, t=t, rest=rest, short=short):
+                V, g = self.energy(y, q, t, short)
                 return V + rest @ y, g + rest
 
             x = minimize(fun, x, jac=True, method="BFGS",
@@ -381,7 +399,7 @@ class _Robot:
                     return sol.x
             T = self.factors(x, direction)
             t = np.array([T[k, :self.crossed[k]].mean() for k in range(self.N)])
-            tau = self.k * np.maximum(self.A @ x - q + self.pre / self.k, 0.0)
+            tau = self.k * np.maximum(self.stretch(x, q), 0.0)
             rest = (self.A * np.repeat(T - t[:, None], 2, axis=1)).T @ tau
             if np.max(np.abs(self.force(x, q, direction))) < 1e-7:
                 break

@@ -29,6 +29,7 @@ EFFECTS = {
     "geometry": RobotTruth(d_length=(2.0, -3.0), d_radius=(0.3, -0.4)),
     "registration": RobotTruth(registration_deg=(1.0, -1.5, 4.0)),
     "routing_twist": RobotTruth(twist_deg=(8.0,)),
+    "clearance": RobotTruth(clearance=(0.1, 0.3)),
 }
 
 

@@ -5,7 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from scipy.optimize import minimize
+from scipy.optimize import minimize, root
 from scipy.spatial.transform import Rotation
 
 import tension_zones as tz
@@ -412,6 +412,80 @@ def test_friction_equilibrium_is_the_root_and_its_derivatives_are_exact():
     for i in range(2):
         e = jnp.zeros(2).at[i].set(h)
         np.testing.assert_allclose(J[:, i], (tip(mu + e) - tip(mu - e)) / (2 * h), rtol=1e-5, atol=1e-6)
+
+
+def _clearance_solve(rob, q, c, mu=(0.0, 0.0), direction=None, pieces=1):
+    phys = rob.params()
+    phys["clearance"], phys["friction"] = jnp.asarray(c), jnp.asarray(mu)
+    st = ms.Structure(rob.n_wires_per_segment, pieces)
+    return E.solve(phys, st, q, jnp.zeros(3), direction)
+
+
+@pytest.mark.parametrize("case", [0, 1])
+def test_clearance_equilibrium_matches_an_independent_root_and_its_derivatives_are_exact(case):
+    """The hole clearance shortens wire k's path by ``C_kj |b_j|`` in every segment j it crosses
+    (``c_own`` in its own, ``c_proximal`` before): the solve is the root of a NumPy force written here
+    from the constant routing ``J_qB`` (and MINPACK's root of it from nearby), and its implicit
+    derivatives in the clearance and the commands match central differences."""
+    rob = three_segments(preload=0.5)
+    q, c = jnp.asarray(Q_CASES[case]), jnp.asarray([0.1, 0.3])
+    B = np.asarray(jax.jit(_clearance_solve)(rob, q, c)).reshape(-1)
+    A = np.asarray(rob.J_qB())
+    owner = np.repeat(np.arange(3), rob.n_wires_per_segment)
+    C = np.where(np.arange(3)[None, :] == owner[:, None], 0.1, np.where(np.arange(3)[None, :] < owner[:, None], 0.3, 0.0))
+    k, pre = np.asarray(rob.wire_stiffness), np.asarray(rob.preload)
+    Ek = np.repeat(np.asarray(rob.backbone_EI) / np.asarray(rob.lengths), 2)
+
+    def force(x):
+        s = A @ x - np.asarray(q) + pre / k - C @ np.hypot(*x.reshape(3, 2).T)
+        return Ek * x + A.T @ (k * np.maximum(s, 0.0))
+
+    np.testing.assert_allclose(force(B), 0.0, atol=1e-8)  # the solve is a root of the NumPy force
+    ref = root(force, B + 1e-3, method="hybr", options={"xtol": 1e-13}).x  # and MINPACK's from near it
+    np.testing.assert_allclose(B, ref, atol=1e-9)
+    assert np.abs(B - np.asarray(EQ(rob, q, None)).reshape(-1)).max() > 1e-3  # the clearance matters
+    tip = jax.jit(lambda c, q: rob.tip_pose(_clearance_solve(rob, q, c))[0])
+    Jc, Jq = jax.jacfwd(tip, argnums=(0, 1))(c, q)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        np.testing.assert_allclose(Jc[:, i], (tip(c + e, q) - tip(c - e, q)) / (2 * h), rtol=1e-5, atol=1e-6)
+    for i in range(q.shape[0]):
+        e = jnp.zeros(q.shape[0]).at[i].set(h)
+        np.testing.assert_allclose(Jq[:, i], (tip(c, q + e) - tip(c, q - e)) / (2 * h), rtol=1e-5, atol=1e-6)
+
+
+def test_clearance_with_friction_in_the_rod_is_the_root_and_its_derivatives_are_exact():
+    """Both non-conservative parts at once, in pieces: the force vanishes at the solve and the
+    derivative in the clearance matches central differences."""
+    rob = three_segments(preload=0.5)
+    q, d = jnp.asarray(Q_CASES[0]), jnp.asarray(np.sign(Q_CASES[0]))
+    c, mu = jnp.asarray([0.1, 0.3]), jnp.asarray([0.1, 0.2])
+    st = ms.Structure(rob.n_wires_per_segment, 3)
+    B = jax.jit(_clearance_solve, static_argnums=5)(rob, q, c, mu, d, 3)
+    phys = rob.params()
+    phys["clearance"], phys["friction"] = c, mu
+    phys["curvature_freedom"] = jnp.ones(3)
+    F = E._Sample(phys, st, q, jnp.zeros(3), d, jnp.asarray(False)).force(B.reshape(-1))
+    np.testing.assert_allclose(F, 0.0, atol=1e-9)
+    tip = jax.jit(lambda c: chain_tip(E.piece_lengths(phys, st), _clearance_solve(rob, q, c, mu, d, 3))[0])
+    J = jax.jacfwd(tip)(c)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        np.testing.assert_allclose(J[:, i], (tip(c + e) - tip(c - e)) / (2 * h), rtol=1e-5, atol=1e-6)
+
+
+def test_clearance_at_the_straight_pose_is_finite_with_finite_gradients():
+    """Regression guard: ``|b|`` has a cone at ``b = 0``; a preloaded segment of evenly spaced wires at
+    ``q = 0`` stays straight and the tip's derivatives in the clearance and the commands are finite
+    there."""
+    rob = ms.Robot([tz.Design(3, 60.0, 4.5, backbone_EI=2400.0, wire_stiffness=60.0, preload=0.5)])
+    q, c = jnp.zeros(rob.n_wires), jnp.asarray([0.1, 0.0])
+    B = jax.jit(_clearance_solve)(rob, q, c)
+    np.testing.assert_allclose(B, 0.0, atol=1e-12)
+    Jc, Jq = jax.jacfwd(lambda c, q: rob.tip_pose(_clearance_solve(rob, q, c))[0], argnums=(0, 1))(c, q)
+    assert np.all(np.isfinite(Jc)) and np.all(np.isfinite(Jq))
 
 
 def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():

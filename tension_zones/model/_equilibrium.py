@@ -26,6 +26,18 @@ factor ``t_k`` stands in ``V``, and the rest of the friction force, ``sum_k tau_
 frozen at the iterate as a constant force (a linear term of ``V``): ``V``'s gradient there is ``F``,
 so the iteration's fixed point is the root of ``F``.
 
+**Hole clearance.** A wire under tension hugs the side of each disk's hole nearest the centre of
+curvature, so its path through a bent piece is shorter than the routing's by ``C_ki |b_i|`` whichever
+way the piece bends (``C_ki`` mm per rad: ``clearance[0]`` in the segment the wire ends in,
+``clearance[1]`` in the proximal ones it crosses): ``s_k`` loses ``sum_i C_ki |b_i|``, and a distal
+segment's wires slacken as the proximal segments bend. The wires' moment arms stay the routing's
+(``a_k`` in ``F``): the contact's own moment, ``tau_k C_ki`` per radian, is left out. Against the
+change of length it is of relative size ``EI / (L k r^2)`` (about 4 % on a 50 N/mm wire at 4.5 mm on
+a 2454 N mm^2, 60 mm backbone) and, kept, it would make a preloaded straight robot buckle into a
+ring of equal minima (``|b|`` has a cone at ``b = 0``). Like friction's, the shortening is frozen at
+the iterate within a Newton step (a constant in ``V``), and the step solves for the root of ``F``
+with its part of ``dF/dx`` (:meth:`_Sample.clearance_matrix`, not symmetric: LU).
+
 **Solver.** Damped Newton on ``V`` (friction frozen at the iterate, above): the backbone's and the
 wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
 backtracking line search over ten step sizes, the largest that satisfies Armijo's condition taken.
@@ -49,7 +61,7 @@ variation, which is what lets the calibration score "variable curvature" like an
 
 Physical parameters are the flat dict of :meth:`Robot.params` (``length``, ``EI`` (S,);
 ``route_angles``, ``route_radii`` (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,);
-``gravity`` (3,)); the calibration's effects change them, so the solver works on that dict and a
+``gravity`` (3,); ``clearance`` (2,), optional, zero if absent); the calibration's effects change them, so the solver works on that dict and a
 :class:`~._robot.Structure` (the static wire counts).
 """
 
@@ -226,6 +238,12 @@ class _Sample:
         c = np.asarray(structure.piece_crosses, float)
         self.wraps = jnp.asarray(c[:, :, None] * c[:, None, :] * before[None], self.A.dtype)
         self.loaded = loaded
+        # hole clearance (module notes): wire k's path through piece i shortened by C_ki |b_i|
+        cl = phys.get("clearance", jnp.zeros(2, self.A.dtype))
+        own = np.asarray(structure.owner)[:, None] == np.repeat(np.arange(structure.n_segments), m)[None, :]
+        proximal = np.asarray(structure.piece_crosses, bool) & ~own
+        self.C = cl[0] * jnp.asarray(own, self.A.dtype) + cl[1] * jnp.asarray(proximal, self.A.dtype)  # (N, P)
+        self.has_clearance = jnp.any(cl != 0)
 
     def _deviation(self, x):
         """``kappa * (x - segment mean)`` (2P,): the curvature-freedom penalty's gradient (0 if m = 1)."""
@@ -258,11 +276,16 @@ class _Sample:
         tau = self.k * jnp.maximum(self.stretch(x), 0.0)
         return (self.A * (self._spread(self.piece_factors(x)) - t[:, None])).T @ tau
 
-    def stretch(self, x):
-        return self.A @ x + self.c
+    def shortening(self, x):
+        """The hole clearance's shortening of each wire's path, ``C |b|`` (N,), mm (0 without it)."""
+        return self.C @ _guarded_norm(x.reshape(-1, 2))
 
-    def value(self, x, t):
-        s = self.stretch(x)
+    def stretch(self, x, shortening=None):
+        """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``."""
+        return self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening)
+
+    def value(self, x, t, shortening=None):
+        s = self.stretch(x, shortening)
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
         elastic = 0.5 * jnp.dot(self.E * x + self._deviation(x), x)
         return elastic + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
@@ -340,20 +363,39 @@ class _Sample:
         turn = jnp.einsum("kp,kpi,kpl,lj->pilj", coef, self.A.reshape(-1, P, 2), self.wraps, unit)
         return rest + turn.reshape(2 * P, 2 * P)
 
+    def clearance_matrix(self, x):
+        """What the hole clearance adds to ``dF/dx`` (2P, 2P), zero without it: each taut wire's moment
+        arms (times its friction factors) times the change of its shortening ``C_k |b|``,
+        ``-sum_k k_k (T_k * a_k) (C_ki b_i / |b_i|)^T`` (0 at ``b_i = 0``)."""
+        B = x.reshape(-1, 2)
+        nb = _guarded_norm(B)
+        unit = (B / jnp.where(nb > 0, nb, 1.0)[:, None]).reshape(-1)  # d|b|/db, 0 at b = 0
+        taut = (self.stretch(x) > 0).astype(x.dtype)
+        arms = self.A * self._spread(self.piece_factors(x))
+        return -arms.T @ ((self.k * taut)[:, None] * (self._spread(self.C) * unit[None, :]))
+
+    def coupling_matrix(self, x, t):
+        """The non-symmetric part of ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t``:
+        :meth:`friction_matrix` plus :meth:`clearance_matrix`."""
+        return self.friction_matrix(x, t) + self.clearance_matrix(x)
+
     def force_jacobian(self, x):
-        """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`friction_matrix`."""
+        """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`friction_matrix` and
+        :meth:`clearance_matrix` (each a run-time branch, skipped where its parameters are zero)."""
         t = self.factor(x)
         zero = jnp.zeros((x.shape[0],) * 2, x.dtype)
-        return self.hess(x, t) + jax.lax.cond(self.has_friction, self.friction_matrix, lambda *_: zero, x, t)
+        return (self.hess(x, t) + jax.lax.cond(self.has_friction, self.friction_matrix, lambda *_: zero, x, t)
+                + jax.lax.cond(self.has_clearance, self.clearance_matrix, lambda _: zero, x))
 
 
 def _newton(sm: _Sample, x0, HL0):
-    """Damped Newton on ``V`` (friction frozen within a step): the backbone's and the wires' Hessian exact,
+    """Damped Newton on ``V`` (friction and the clearance's shortening frozen within a step): the backbone's and the wires' Hessian exact,
     the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
     the start and without a load), so that a loaded solve converges superlinearly without second
-    derivatives of the chain; with friction (a run-time branch on ``mu != 0``), its part of ``dF/dx``
-    is added (not symmetric: an LU solve) and its force beyond the mean factors is frozen in ``V``
-    (module notes); without it the step is a Cholesky solve. Where that step gives no descent the
+    derivatives of the chain; with friction or a hole clearance (a run-time branch on ``mu != 0`` or
+    ``clearance != 0``), their part of ``dF/dx`` is added (not symmetric: an LU solve), and friction's
+    force beyond the mean factors and the clearance's shortening are frozen in ``V`` (module notes);
+    without them the step is a Cholesky solve. Where that step gives no descent the
     step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
     ``_STEPS`` with Armijo's decrease is taken (tried from the largest down). Starts from ``x0``
     (2P,) with the load curvature ``HL0`` (2P, 2P) (a previous solve's, :func:`solve_warm`; zero for
@@ -363,16 +405,17 @@ def _newton(sm: _Sample, x0, HL0):
     def solve(H, g):
         return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
-    def with_friction(x, t, H, g0):
+    def coupled(x, t, H, g0):
         # the rest of the friction force, frozen at the iterate (a constant force in V, module notes),
-        # and the step to the root of F: friction's part of dF/dx is not symmetric (an LU solve)
+        # and the step to the root of F: friction's and the clearance's part of dF/dx is not
+        # symmetric (an LU solve)
         rest = sm.friction_rest(x, t)
-        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t), g0 + rest)
+        return rest, -jnp.linalg.solve(H + sm.coupling_matrix(x, t), g0 + rest)
 
     def without(x, t, H, g0):  # V's own Newton step (symmetric: Cholesky)
         return jnp.zeros_like(g0), solve(H, g0)
 
-    def search(x, d, t, rest, g, v0):
+    def search(x, d, t, rest, g, v0, short):
         # backtracking: the largest of ``_STEPS`` with Armijo's decrease (with a round-off allowance,
         # so converged steps are not rejected by noise in V), tried from the largest down; under a
         # vmap over samples it runs until every sample has its step, which near the equilibrium is
@@ -383,7 +426,7 @@ def _newton(sm: _Sample, x0, HL0):
 
         def next_step(c):
             s = steps[c[0]]
-            ok = sm.value(x + s * d, t) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
+            ok = sm.value(x + s * d, t, short) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
             return jnp.where(ok, c[0], c[0] + 1), ok
 
         j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
@@ -392,15 +435,17 @@ def _newton(sm: _Sample, x0, HL0):
     def body(state):
         x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
         t = sm.factor(x)
+        short = sm.shortening(x)  # the clearance's, frozen within the step
         g0, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
-        # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
-        # it stays a branch there, and a robot without friction skips its terms and the LU solve
-        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, H + HL, g0)
+        # a run-time branch on the friction coefficients and the clearance: they are shared by a vmap
+        # over samples, so it stays a branch there, and a robot without either skips their terms and
+        # the LU solve
+        rest, d_full = jax.lax.cond(sm.has_friction | sm.has_clearance, coupled, without, x, t, H + HL, g0)
         g = g0 + rest
         d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
-        step = search(x, d, t, rest, g, sm.value(x, t))
+        step = search(x, d, t, rest, g, sm.value(x, t, short), short)
         x_new = x + step
         # SR1 update of the load's curvature from the change of its gradient along the step
         gl_new = sm.load_grad(x_new)

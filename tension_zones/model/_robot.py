@@ -280,7 +280,8 @@ class Robot:
     def params(self) -> dict:
         """The physical parameters as a flat dict of arrays, the form the equilibrium and the
         calibration effects work on: ``length``, ``EI`` (S,); ``route_angles``, ``route_radii``
-        (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,) and ``gravity`` (3,), zero;
+        (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,), ``gravity`` (3,) and the holes'
+        ``clearance`` (2,), zero;
         ``curvature_freedom`` (S,), one (a segment solved in pieces is an elastic rod, see
         :mod:`._equilibrium`)."""
         dt = self.route_angles.dtype
@@ -288,7 +289,7 @@ class Robot:
                 "curvature_freedom": jnp.ones(self.n_segments, dt),
                 "route_angles": self.route_angles, "route_radii": self.route_radii,
                 "wire_stiffness": self.wire_stiffness.astype(dt), "preload": self.preload.astype(dt),
-                "friction": jnp.zeros(2, dt), "gravity": jnp.zeros(3, dt)}
+                "friction": jnp.zeros(2, dt), "gravity": jnp.zeros(3, dt), "clearance": jnp.zeros(2, dt)}
 
     # -- kinematics of one configuration B (S, 2) ----------------------------------------------
     def _B(self, B):
