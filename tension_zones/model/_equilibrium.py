@@ -380,12 +380,12 @@ class _Sample:
         return self.friction_matrix(x, t) + self.clearance_matrix(x)
 
     def force_jacobian(self, x):
-        """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`friction_matrix` and
-        :meth:`clearance_matrix` (each a run-time branch, skipped where its parameters are zero)."""
+        """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`coupling_matrix` (a
+        run-time branch, skipped where friction and clearance are zero)."""
         t = self.factor(x)
         zero = jnp.zeros((x.shape[0],) * 2, x.dtype)
-        return (self.hess(x, t) + jax.lax.cond(self.has_friction, self.friction_matrix, lambda *_: zero, x, t)
-                + jax.lax.cond(self.has_clearance, self.clearance_matrix, lambda _: zero, x))
+        return self.hess(x, t) + jax.lax.cond(self.has_friction | self.has_clearance, self.coupling_matrix,
+                                              lambda *_: zero, x, t)
 
 
 def _newton(sm: _Sample, x0, HL0):
