@@ -210,10 +210,11 @@ def test_a_single_rod_segment_under_its_weight_is_named_a_rod(tmp_path):
     assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
 
 
-@pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload")])
+@pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction")])
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
     """Two effects at once. Geometry with a tracker tilt: the loop named a marker offset instead (4.3x
-    the noise floor) until it took a second look where no score was significant."""
+    the noise floor) until it took a second look where no score was significant. The hole clearance
+    with friction: both make the distal segments bend less the more the proximal ones bend."""
     a, b = pair
     nominal = RobotTruth()
     own_b = {f.name: getattr(EFFECTS[b], f.name) for f in dataclasses.fields(nominal)

@@ -24,7 +24,7 @@ For any robot (one segment or many) and any reader:
    whose removal no longer raises the held-out error significantly (same test) was only standing in
    for the new one, and is removed.
 4. Repeat until no candidate helps (where no score is significant but the held-out error is more
-   than ``EXCESS_RATIO`` times the noise floor and its residual is not noise, the best four scores get a
+   than ``EXCESS_RATIO`` times the noise floor and its residual is not noise, every positive score gets a
    second look: short refits, then the tests above, with at least ``SECOND_LOOK_SHARE`` of the excess to
    explain: a score is first order); test the final held-out residual for structure left. Where it
    has structure left and a round kept one of two refits the test cannot tell apart (held-out sums
@@ -360,16 +360,18 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # critical 3.7, held-out 0.240 -> 0.082 mm, the noise floor, after a short refit) can explain
             # far more than its score says. Where no score is significant but the held-out error is more
             # than ``EXCESS_RATIO`` times the noise floor and its residual not noise (the final flag's
-            # test: structure along an input, an offset, or a clear excess), the best-scoring candidates
-            # get a short refit each, and the refits' tests below decide, with a larger share of the
-            # excess to explain (``SECOND_LOOK_SHARE``). (Closer to the floor, what is left is too little
+            # test: structure along an input, an offset, or a clear excess), every candidate with a
+            # positive score gets a short refit, and the refits' tests below decide, with a larger share
+            # of the excess to explain (``SECOND_LOOK_SHARE``). Not only the best scores: an effect that
+            # the one before it has partly absorbed scores low (the hole clearance after friction: 1.96,
+            # eighth, and its refit took the held-out error from 7x the noise floor to the floor). (Closer to the floor, what is left is too little
             # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
             # structure that a geometry change took half of: the model's own discretisation.)
             excess = _excess(plain, err, noise, m)
             second_look = (not significant and excess["ratio_to_floor"] > EXCESS_RATIO
                            and _flagged({**structure_test(r[held], held_feats, sigma), "excess_over_noise": excess}))
             if second_look:
-                significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s][:TRIES_PER_ROUND]
+                significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s]
                 for s in significant:
                     s["second_look"] = True
             unit = unit_of(err)
