@@ -210,6 +210,17 @@ def test_a_single_rod_segment_under_its_weight_is_named_a_rod(tmp_path):
     assert rep["rmse_after_mm"] < 1.3 * floor and rep["rmse_validate_mm"] < 1.3 * floor
 
 
+def test_a_single_segments_hole_clearance_is_named_and_fitted(tmp_path):
+    """One segment (the robot's second alone): the clearance has only its own-segment part there, which
+    moves the tip only where wires are slack (an even shortening of taut wires only changes their
+    tension), so its score is low (about 2): it is named on a second look, its value within 5 %."""
+    truth = RobotTruth(design={"segments": [dict(ROBOT["segments"][1])]}, pattern_rotation_deg=(12.0,),
+                       EI_factors=(1.1,), clearance=(0.2, 0.0))
+    rep = run(tmp_path, "clearance_one", truth)
+    assert names(rep) == ["clearance"]
+    assert abs(rep["effects"][0]["params"]["c_own_mm_per_rad"] - 0.2) < 0.01
+
+
 @pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction")])
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
     """Two effects at once. Geometry with a tracker tilt: the loop named a marker offset instead (4.3x
