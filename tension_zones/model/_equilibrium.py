@@ -61,8 +61,8 @@ variation, which is what lets the calibration score "variable curvature" like an
 
 Physical parameters are the flat dict of :meth:`Robot.params` (``length``, ``EI`` (S,);
 ``route_angles``, ``route_radii`` (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,);
-``gravity`` (3,); ``clearance`` (2,), optional, zero if absent); the calibration's effects change them, so the solver works on that dict and a
-:class:`~._robot.Structure` (the static wire counts).
+``gravity`` (3,); ``clearance`` (2,), optional, zero if absent); the calibration's effects change
+them, so the solver works on that dict and a :class:`~._robot.Structure` (the static wire counts).
 """
 
 from __future__ import annotations
@@ -389,11 +389,12 @@ class _Sample:
 
 
 def _newton(sm: _Sample, x0, HL0):
-    """Damped Newton on ``V`` (friction and the clearance's shortening frozen within a step): the backbone's and the wires' Hessian exact,
-    the load's curvature learnt from its gradients along the way (a symmetric rank-one update, zero at
-    the start and without a load), so that a loaded solve converges superlinearly without second
-    derivatives of the chain; with friction or a hole clearance (a run-time branch on ``mu != 0`` or
-    ``clearance != 0``), their part of ``dF/dx`` is added (not symmetric: an LU solve), and friction's
+    """Damped Newton on ``V`` (friction and the clearance's shortening frozen within a step): the
+    backbone's and the wires' Hessian exact, the load's curvature learnt from its gradients along the
+    way (a symmetric rank-one update, zero at the start and without a load), so that a loaded solve
+    converges superlinearly without second derivatives of the chain; with friction or a hole clearance
+    (a run-time branch on ``mu != 0`` or ``clearance != 0``), their part of ``dF/dx`` is added (not
+    symmetric: an LU solve), and friction's
     force beyond the mean factors and the clearance's shortening are frozen in ``V`` (module notes);
     without them the step is a Cholesky solve. Where that step gives no descent the
     step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
