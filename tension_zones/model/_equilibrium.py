@@ -34,9 +34,14 @@ segment's wires slacken as the proximal segments bend. The wires' moment arms st
 (``a_k`` in ``F``): the contact's own moment, ``tau_k C_ki`` per radian, is left out. Against the
 change of length it is of relative size ``EI / (L k r^2)`` (about 4 % on a 50 N/mm wire at 4.5 mm on
 a 2454 N mm^2, 60 mm backbone) and, kept, it would make a preloaded straight robot buckle into a
-ring of equal minima (``|b|`` has a cone at ``b = 0``). Like friction's, the shortening is frozen at
-the iterate within a Newton step (a constant in ``V``), and the step solves for the root of ``F``
-with its part of ``dF/dx`` (:meth:`_Sample.clearance_matrix`, not symmetric: LU).
+ring of equal minima (``|b|`` has a cone at ``b = 0``). The shortening is frozen at the iterate within
+a Newton step (a constant in ``V``, whose own step is taken): a fixed point on the shortening, which
+contracts by about ``c / r`` a step. Its part of ``dF/dx`` (:meth:`_Sample.clearance_matrix`) enters
+only the implicit derivative. In the step's LU solve (as friction's part is) it converged in fewer
+iterations, but its mere presence in that branch made every rod solve without clearance about 12 %
+slower (1000 FTDCR v4 samples, 4 pieces, interleaved runs: 58-62 against 52-58 us a sample; now
+54-58, as before the clearance), and the solves with it were slower too (one run each: 153 against
+136 us; 26 against 24 us at constant curvature).
 
 **Solver.** Damped Newton on ``V`` (friction frozen at the iterate, above): the backbone's and the
 wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
@@ -293,8 +298,8 @@ class _Sample:
     def load_grad(self, x):
         return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
 
-    def grad(self, x, t, load_grad=None):
-        tau = t * self.k * jnp.maximum(self.stretch(x), 0.0)
+    def grad(self, x, t, load_grad=None, shortening=None):
+        tau = t * self.k * jnp.maximum(self.stretch(x, shortening), 0.0)
         load = self.load_grad(x) if load_grad is None else load_grad
         return self.E * x + self._deviation(x) + self.A.T @ tau + load
 
@@ -318,13 +323,13 @@ class _Sample:
         :meth:`_load_hessian` for the load (the exact implicit derivative uses it)."""
         return self.newton_matrix(x, t) + self._load_hessian(x)
 
-    def newton_matrix(self, x, t):
+    def newton_matrix(self, x, t, shortening=None):
         """The Newton step's matrix: the backbone's and the taut wires' Hessian, positive definite.
         The load's curvature is left out: it is small against the wires' (a tip force or a weight on
         a robot that holds it) and may be indefinite; the line search and the fixed point make up for
         it at a few more iterations, each much cheaper (no differences of the load's gradient, a
         Cholesky solve instead of an eigendecomposition)."""
-        taut = (self.stretch(x) > 0).astype(x.dtype)
+        taut = (self.stretch(x, shortening) > 0).astype(x.dtype)
         H = jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A
         return H if self.m == 1 else H + self.kappa[:, None] * self.D
 
@@ -393,10 +398,9 @@ def _newton(sm: _Sample, x0, HL0):
     backbone's and the wires' Hessian exact, the load's curvature learnt from its gradients along the
     way (a symmetric rank-one update, zero at the start and without a load), so that a loaded solve
     converges superlinearly without second derivatives of the chain; with friction or a hole clearance
-    (a run-time branch on ``mu != 0`` or ``clearance != 0``), their part of ``dF/dx`` is added (not
-    symmetric: an LU solve), and friction's
-    force beyond the mean factors and the clearance's shortening are frozen in ``V`` (module notes);
-    without them the step is a Cholesky solve. Where that step gives no descent the
+    (a run-time branch on ``mu != 0``), friction's part of ``dF/dx`` is added (not symmetric: an LU
+    solve); friction's force beyond the mean factors and the clearance's shortening are frozen in ``V``
+    (module notes); without friction the step is a Cholesky solve. Where that step gives no descent the
     step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
     ``_STEPS`` with Armijo's decrease is taken (tried from the largest down). Starts from ``x0``
     (2P,) with the load curvature ``HL0`` (2P, 2P) (a previous solve's, :func:`solve_warm`; zero for
@@ -406,12 +410,11 @@ def _newton(sm: _Sample, x0, HL0):
     def solve(H, g):
         return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
-    def coupled(x, t, H, g0):
+    def with_friction(x, t, H, g0):
         # the rest of the friction force, frozen at the iterate (a constant force in V, module notes),
-        # and the step to the root of F: friction's and the clearance's part of dF/dx is not
-        # symmetric (an LU solve)
+        # and the step to the root of F: friction's part of dF/dx is not symmetric (an LU solve)
         rest = sm.friction_rest(x, t)
-        return rest, -jnp.linalg.solve(H + sm.coupling_matrix(x, t), g0 + rest)
+        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t), g0 + rest)
 
     def without(x, t, H, g0):  # V's own Newton step (symmetric: Cholesky)
         return jnp.zeros_like(g0), solve(H, g0)
@@ -436,12 +439,13 @@ def _newton(sm: _Sample, x0, HL0):
     def body(state):
         x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
         t = sm.factor(x)
-        short = sm.shortening(x)  # the clearance's, frozen within the step
-        g0, H = sm.grad(x, t, gl), sm.newton_matrix(x, t)
-        # a run-time branch on the friction coefficients and the clearance: they are shared by a vmap
-        # over samples, so it stays a branch there, and a robot without either skips their terms and
-        # the LU solve
-        rest, d_full = jax.lax.cond(sm.has_friction | sm.has_clearance, coupled, without, x, t, H + HL, g0)
+        # the clearance's shortening, frozen within the step; a run-time branch: the iterations carry no
+        # derivative (the implicit one is taken from F at the root), so zero clearance skips it
+        short = jax.lax.cond(sm.has_clearance, sm.shortening, lambda y: jnp.zeros_like(sm.c), x)
+        g0, H = sm.grad(x, t, gl, short), sm.newton_matrix(x, t, short)
+        # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
+        # it stays a branch there, and a robot without friction skips its terms and the LU solve
+        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, H + HL, g0)
         g = g0 + rest
         d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
