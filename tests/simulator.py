@@ -372,7 +372,7 @@ class _Robot:
         force, the rest of the friction force, all updated from the solution until the force itself
         vanishes."""
         t, rest, x = np.ones(self.N), np.zeros(2 * self.S), x0
-        friction = bool(np.any(self.mu) and np.any(direction)) or bool(np.any(self.C))
+        nonconservative = bool(np.any(self.mu) and np.any(direction)) or bool(np.any(self.C))
         for it in range(100):
             # gtol 1e-6: the tip within 1e-6 mm of a 1e-10 solve (checked), at half the cost (1e-8 with
             # friction, whose fixed point needs the force to 1e-7); started from the elastic part's
@@ -387,8 +387,8 @@ class _Robot:
                 return V + rest @ y, g + rest
 
             x = minimize(fun, x, jac=True, method="BFGS",
-                         options={"gtol": 1e-8 if friction else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)}).x
-            if not friction:
+                         options={"gtol": 1e-8 if nonconservative else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)}).x
+            if not nonconservative:
                 break
             if it == 0:
                 # MINPACK's hybrid method on the force itself, from the first solve: a handful of force

@@ -364,7 +364,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # positive score gets a short refit, and the refits' tests below decide, with a larger share
             # of the excess to explain (``SECOND_LOOK_SHARE``). Not only the best scores: an effect that
             # the one before it has partly absorbed scores low (the hole clearance after friction: 1.96,
-            # eighth, and its refit took the held-out error from 7x the noise floor to the floor). (Closer to the floor, what is left is too little
+            # eighth, and its refit took the held-out error from 7x the noise floor to the floor).
+            # (Closer to the floor, what is left is too little
             # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
             # structure that a geometry change took half of: the model's own discretisation.)
             excess = _excess(plain, err, noise, m)

@@ -397,10 +397,10 @@ def _newton(sm: _Sample, x0, HL0):
     """Damped Newton on ``V`` (friction and the clearance's shortening frozen within a step): the
     backbone's and the wires' Hessian exact, the load's curvature learnt from its gradients along the
     way (a symmetric rank-one update, zero at the start and without a load), so that a loaded solve
-    converges superlinearly without second derivatives of the chain; with friction or a hole clearance
-    (a run-time branch on ``mu != 0``), friction's part of ``dF/dx`` is added (not symmetric: an LU
-    solve); friction's force beyond the mean factors and the clearance's shortening are frozen in ``V``
-    (module notes); without friction the step is a Cholesky solve. Where that step gives no descent the
+    converges superlinearly without second derivatives of the chain. With friction (a run-time branch
+    on ``mu != 0``) its part of ``dF/dx`` is added (not symmetric: an LU solve) and its force beyond
+    the mean factors is frozen in ``V``; without it the step is a Cholesky solve. A hole clearance's
+    shortening is frozen in ``V`` too (a fixed point; module notes). Where that step gives no descent the
     step falls back to the elastic part alone. Steps are capped (``MAX_STEP``) and the largest of
     ``_STEPS`` with Armijo's decrease is taken (tried from the largest down). Starts from ``x0``
     (2P,) with the load curvature ``HL0`` (2P, 2P) (a previous solve's, :func:`solve_warm`; zero for
@@ -430,7 +430,8 @@ def _newton(sm: _Sample, x0, HL0):
 
         def next_step(c):
             s = steps[c[0]]
-            ok = sm.value(x + s * d, t, short) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0))
+            ok = (sm.value(x + s * d, t, short) + s * jnp.dot(rest, d)
+                  <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
             return jnp.where(ok, c[0], c[0] + 1), ok
 
         j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
