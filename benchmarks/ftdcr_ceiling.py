@@ -28,7 +28,7 @@ import numpy as np
 
 from tension_zones.calibration import rmse
 from tension_zones.calibration._data import pattern_family
-from tension_zones.calibration._model import RobotModel
+from tension_zones.calibration._model import RobotModel, data_clock
 from tension_zones.calibration._problem import Problem
 from tension_zones.calibration.effects import BY_NAME
 
@@ -39,7 +39,8 @@ ITERATIONS = 80
 def main():
     robot, report, train, val = _ftdcr.load()
     m = report["model"]
-    pb = Problem(RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]))
+    pb = Problem(RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]),
+                 clock=data_clock(train))
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
     w_train, w_both = (~vmask).astype(float), np.ones(vmask.size)
     fam = np.array([pattern_family(g) for g in val.groups])

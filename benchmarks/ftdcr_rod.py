@@ -26,7 +26,7 @@ import numpy as np
 import tension_zones as tz
 from tension_zones.calibration import rmse, rmse_aligned
 from tension_zones.calibration._loop import _initial
-from tension_zones.calibration._model import RobotModel
+from tension_zones.calibration._model import RobotModel, data_clock
 from tension_zones.calibration._problem import Problem
 from tension_zones.calibration.effects import library, nominal
 
@@ -42,7 +42,7 @@ def main(argv=None):
     fit_rows, held, vmask = np.r_[fit_rows, pad], np.r_[held, pad], np.r_[np.zeros(train.n_samples, bool), ~pad]
     w, w_all = fit_rows.astype(float), (fit_rows | held).astype(float)
     nom = nominal(train.frame)
-    pb = Problem(RobotModel.of(robot), robot, full, tuple(nom) + tuple(library(train.frame)))
+    pb = Problem(RobotModel.of(robot), robot, full, tuple(nom) + tuple(library(train.frame)), clock=data_clock(train))
     names = [b.name for b in nom]
 
     def errors(theta, theta_all, active):

@@ -197,6 +197,7 @@ class RobotTruth:
     twist_deg: tuple = ()  # per pair of neighbouring segments: turn of segment j's disks against j + 1's
     clearance: tuple = (0.0, 0.0)  # mm per rad of bending: a wire's path shortened in its own segment, the ones before
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
+    wire_drift: float = 0.0  # mm per hour: every wire lengthens at this rate on the recordings' clock
     noise: float = 0.05
     pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
 
@@ -434,8 +435,9 @@ def robot_patterns(design: dict, rng, val: bool = False, servos=None, steps: int
     return out
 
 
-def simulate_robot(truth: RobotTruth, patterns, seed: int = 0):
-    """Measured tip positions (T, 3) in the tracker frame for the patterns' commands, in order."""
+def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
+    """Measured tip positions (T, 3) in the tracker frame for the patterns' commands, in order;
+    ``hours`` (T,): each sample's time on the wires' drift clock (default 0)."""
     rng = np.random.default_rng(seed)
     rob = _Robot(truth)
     Q = np.concatenate([q for _, q in patterns])
@@ -452,7 +454,7 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0):
                 q_eff[k] = Q[i, k] - play[k] / 2
             elif Q[i, k] < q_eff[k] - play[k] / 2:
                 q_eff[k] = Q[i, k] + play[k] / 2
-        x = rob.equilibrium(q_eff, last_dir, x)
+        x = rob.equilibrium(q_eff + truth.wire_drift * (0.0 if hours is None else hours[i]), last_dir, x)
         ps, Rs, _, _ = rob.chain(x.reshape(rob.S, 2))
         P[i] = R_reg.apply(ps[-1] + Rs[-1] @ np.asarray(truth.marker, float)) + np.asarray(truth.translation)
     s = np.arange(len(Q)) / len(Q)
@@ -472,14 +474,15 @@ def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bo
     servos = [int(s) for s in rng.permutation(N) + 1]  # servo driving each tendon
 
     def write(path, pats, t0):
-        P = simulate_robot(truth, pats, seed=int(rng.integers(1 << 30)))
         Q = np.concatenate([q for _, q in pats])
+        times = t0 + 0.5 * np.arange(len(Q))  # s; the drift's clock starts with the training file
+        P = simulate_robot(truth, pats, seed=int(rng.integers(1 << 30)), hours=(times - 100.0) / 3600.0)
         labels = [lab for lab, q in pats for _ in range(len(q))]
         order = sorted(servos)
         lines = ["timestamp,pattern_label," + ",".join(f"servo_{s}_mm" for s in order) + ",tip_x,tip_y,tip_z"]
         for i, (lab, q, p) in enumerate(zip(labels, Q, P)):
             vals = [-q[servos.index(s)] for s in order] + list(p)  # the lab's sign: positive = pulled in
-            lines.append(f"{t0 + 0.5 * i:.2f},{lab}," + ",".join(f"{v:.6f}" for v in vals))
+            lines.append(f"{times[i]:.2f},{lab}," + ",".join(f"{v:.6f}" for v in vals))
         path.write_text("\n".join(lines) + "\n")
         return path
 

@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 import tension_zones as tz
 from tension_zones.calibration import Dataset, Problem, RobotModel, compilations, motion_direction
+from tension_zones.calibration._model import data_clock, elapsed_hours
 from tension_zones.calibration._problem import predict_theta
 from tension_zones.calibration.effects import ALL, BY_NAME, library, nominal, play
 
@@ -54,6 +55,23 @@ def test_motion_direction_keeps_last_direction_and_restarts():
     reset = jnp.array([1, 0, 0, 0, 0, 0, 0, 1, 0.0])
     np.testing.assert_array_equal(motion_direction(q)[:, 0], [0, 1, 1, -1, -1, -1, 1, 1, -1])
     np.testing.assert_array_equal(motion_direction(q, reset)[:, 0], [0, 1, 1, -1, -1, -1, 1, 0, -1])
+
+
+def test_the_drifts_clock_holds_within_the_fit_datas_span():
+    """Hours since the fit data's first timestamp, held within its span (a later or earlier recording
+    takes the drift at the nearest end; one without timestamps the end); zeros without a clock; the
+    drift effect adds its rate times them to every wire's command."""
+    fit = dataclasses.replace(_data(5, 3), timestamp=1000.0 + 900.0 * np.arange(5))  # one hour
+    clock = data_clock(fit)
+    assert clock == (1000.0, 1.0)
+    np.testing.assert_allclose(elapsed_hours(fit), [0, 0.25, 0.5, 0.75, 1.0])
+    later = dataclasses.replace(_data(3, 3), timestamp=np.array([0.0, 2800.0, 9000.0]))
+    np.testing.assert_allclose(elapsed_hours(later, clock), [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(elapsed_hours(_data(2, 3), clock), [1.0, 1.0])
+    assert data_clock(_data(2, 3)) is None and not np.any(elapsed_hours(_data(2, 3)))
+    inputs = RobotModel.of(tz.Robot(D3)).inputs(later, clock)
+    out = BY_NAME["drift"].on_inputs(jnp.array([0.4]), inputs, None, {})
+    np.testing.assert_allclose(out["q"] - later.q, 0.4 * np.array([[0.0], [0.5], [1.0]]) * np.ones(3))
 
 
 def _data(n, N, seed=0, frame="base"):
@@ -101,9 +119,11 @@ def test_every_effect_is_defined_for_any_robot_and_null_means_none():
     """Each effect of the library on a two-segment robot with 3 + 4 wires: its null values leave the
     prediction unchanged, a small change of every parameter moves it, and its sensitivities are
     finite (the score test differentiates there). The model is in pieces (the rod, for the variable
-    curvature) and the samples carry known tip forces (without a load the rod is constant curvature)."""
+    curvature), the samples carry known tip forces (without a load the rod is constant curvature) and
+    timestamps (the drift's clock)."""
     data = _data(30, 7, seed=3, frame="tracker")
-    data = dataclasses.replace(data, f=np.random.default_rng(5).normal(0.0, 0.3, (30, 3)))
+    data = dataclasses.replace(data, f=np.random.default_rng(5).normal(0.0, 0.3, (30, 3)),
+                               timestamp=60.0 * np.arange(30))
     pb = Problem(RobotModel.of(TWO), TWO, data, ALL)  # with the variable curvature on: the rod's program
     sl = pb.spec.slices()
     names = [b.name for b in ALL]

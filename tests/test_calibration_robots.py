@@ -221,6 +221,19 @@ def test_a_single_segments_hole_clearance_is_named_and_fitted(tmp_path):
     assert abs(rep["effects"][0]["params"]["c_own_mm_per_rad"] - 0.2) < 0.01
 
 
+def test_a_drift_of_the_wires_is_named_and_fitted(tmp_path):
+    """Every wire lengthens at 2 mm per hour on the recording's clock (thermal expansion, creep): the
+    loop names the drift alone, fits its rate, and the held-out error reaches the noise floor. The
+    validation file (recorded 80 min later, the drift gone on) is predicted with the drift held at the
+    training file's end: never a trend extrapolated."""
+    rep = run(tmp_path, "wire_drift", RobotTruth(wire_drift=2.0))
+    assert names(rep) == ["drift"]
+    d = rep["effects"][0]["params"]["wire_drift_mm_per_h"]
+    assert abs(d - 2.0) < 0.1, d
+    assert rep["rmse_after_mm"] < 1.3 * rep["noise_floor_mm"] and not rep["unexplained_structure"]
+    assert rep["model"]["clock"][0] == 100.0  # the training file's first timestamp
+
+
 @pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction")])
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
     """Two effects at once. Geometry with a tracker tilt: the loop named a marker offset instead (4.3x

@@ -64,7 +64,7 @@ from ._baselines import baselines
 from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
-from ._model import RobotModel
+from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
 from .effects import library as default_library
 from .effects import nominal as default_nominal
@@ -166,7 +166,7 @@ class Result:
                            "at_bound": self.at_bound},
             "correlations": self.correlations,
             "model": {"blocks": [b.name for b in pb.spec.blocks], "active": list(self.active),
-                      "theta": np.asarray(self.theta_after).tolist()},
+                      "theta": np.asarray(self.theta_after).tolist(), "clock": pb.clock},
             "seconds": self.seconds,
         }
         if self.val.any():
@@ -254,7 +254,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     val = np.arange(full.n_samples) >= n_fit
     train = np.r_[train, np.zeros(full.n_samples - n_fit, bool)]
     held = np.r_[held, np.zeros(full.n_samples - n_fit, bool)]
-    pb = Problem(model, robot, full, tuple(nominal) + tuple(library))
+    # the drift's clock is the data file's: a validation file takes the drift at its nearest end
+    pb = Problem(model, robot, full, tuple(nominal) + tuple(library), clock=data_clock(data))
     cand_names = [b.name for b in library]
     nominal_names = [b.name for b in nominal]
     sl = pb.spec.slices()
@@ -276,7 +277,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
     warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
     with Runner(fits, n_workers,
-                (model, robot, full, tuple(nominal) + tuple(library)), warm) as run:
+                (model, robot, full, tuple(nominal) + tuple(library), pb.clock), warm) as run:
         # without a worker, a spare core compiles on a thread what the loop will run: the rod's program
         # where the first round scores it for sure (the model carries a load from the start: known tip
         # forces, a declared weight), the final refit's once the first fit has fixed the fits' rows
@@ -631,5 +632,7 @@ def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
 
     robot = Robot(robot) if isinstance(robot, Design) else robot
     m = report["model"]
-    pb = Problem(RobotModel.of(robot), robot, data, tuple(BY_NAME[n] for n in m["blocks"]))
+    clock = m.get("clock")
+    pb = Problem(RobotModel.of(robot), robot, data, tuple(BY_NAME[n] for n in m["blocks"]),
+                 clock=None if clock is None else tuple(clock))
     return pb.predict(np.asarray(m["theta"], float), m["active"])

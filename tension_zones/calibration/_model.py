@@ -20,6 +20,7 @@ import dataclasses
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..model import Robot, Structure
 from ..model._equilibrium import cold_state, piece_lengths, solve_warm
@@ -47,6 +48,29 @@ def motion_direction(q, reset=None):
 
     _, out = jax.lax.scan(step, jnp.zeros(q.shape[1], q.dtype), (dq, reset))
     return out
+
+
+def data_clock(data: Dataset):
+    """The drift's clock of a recording the model is fitted on: ``(origin, span)``, its first timestamp
+    (s) and its length (hours); None without timestamps."""
+    if data.timestamp is None:
+        return None
+    t = np.asarray(data.timestamp, float)
+    return float(t[0]), float((t[-1] - t[0]) / 3600.0)
+
+
+def elapsed_hours(data: Dataset, clock=None) -> np.ndarray:
+    """(N,) hours on ``clock`` (:func:`data_clock` of the fit data; default: ``data``'s own), held
+    within its span: the drift effect's time. A recording before or after the fit data (a validation
+    file, new commands) takes the drift at the nearest end of the fitted time, never a trend
+    extrapolated; one without timestamps the drift at the end. Zeros without a clock."""
+    clock = data_clock(data) if clock is None else clock
+    if clock is None:
+        return np.zeros(data.n_samples)
+    origin, span = clock
+    if data.timestamp is None:
+        return np.full(data.n_samples, span)
+    return np.clip((np.asarray(data.timestamp, float) - origin) / 3600.0, 0.0, span)
 
 
 @jax.jit
@@ -81,12 +105,14 @@ class RobotModel:
                              f"{self.structure.n_wires_per_segment}")
         return _declared(robot)
 
-    def inputs(self, data: Dataset) -> dict:
+    def inputs(self, data: Dataset, clock=None) -> dict:
+        """Per-sample inputs; ``clock``: the drift's (:func:`elapsed_hours`)."""
         if data.n_wires != self.structure.n_wires:
             raise ValueError(f"the data have {data.n_wires} wire columns, the robot {self.structure.n_wires} wires")
         q = jnp.asarray(data.q)
         reset = jnp.asarray(data.reset, q.dtype)
-        return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset}
+        return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset,
+                "hours": jnp.asarray(elapsed_hours(data, clock), q.dtype)}
 
     @staticmethod
     def loaded(phys, inputs):

@@ -248,7 +248,7 @@ def _pad(data):
 class Problem:
     """A model, its blocks and one data set, ready to fit: the NumPy edge around the jitted core."""
 
-    def __init__(self, model, robot, data, blocks):
+    def __init__(self, model, robot, data, blocks, clock=None):
         self.model = model
         self.data = data
         self.n = data.n_samples
@@ -257,7 +257,8 @@ class Problem:
         phys_np = jax.tree_util.tree_map(np.asarray, self.phys0)
         sizes = tuple(int(b.size(model, phys_np)) for b in blocks)
         self.spec = Spec(model=model, blocks=tuple(blocks), sizes=sizes)
-        self.inputs = model.inputs(padded)
+        self.inputs = model.inputs(padded) if clock is None else model.inputs(padded, clock)
+        self.clock = clock
         self.y = jnp.asarray(padded.p)
         self.n_padded = padded.n_samples
         self.null = np.concatenate([b.null(model, phys_np) for b in blocks])

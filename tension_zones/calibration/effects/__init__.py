@@ -8,6 +8,7 @@ from ._base import Effect
 from .backbone import BackboneEI
 from .backlash import Backlash, play
 from .clearance import Clearance
+from .drift import Drift
 from .friction import Friction
 from .geometry import Geometry
 from .gravity import Gravity
@@ -24,8 +25,8 @@ from .wire_stiffness import WireStiffness
 
 #: Every effect, in the order reports list them.
 ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
-       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Marker(),
-       Geometry())
+       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Drift(),
+       Marker(), Geometry())
 #: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
 #: in an unregistered tracker frame, whose origin is never known, nor which way each segment's wires
 #: point (a rotation of the tracker is a candidate: the registration).
@@ -44,6 +45,6 @@ def nominal(frame: str = "base") -> tuple[Effect, ...]:
     return tuple(BY_NAME[n] for n in NOMINAL[frame])
 
 
-__all__ = ["ALL", "BY_NAME", "NOMINAL", "BackboneEI", "Backlash", "Clearance", "Effect", "Friction", "Geometry", "Gravity",
+__all__ = ["ALL", "BY_NAME", "NOMINAL", "BackboneEI", "Backlash", "Clearance", "Drift", "Effect", "Friction", "Geometry", "Gravity",
            "Marker", "Offset", "PatternRotation", "Preload", "Registration", "RoutingTwist", "TipForce", "VariableCurvature", "WireAngleOffset", "WireStiffness",
            "library", "nominal", "play"]

@@ -1,0 +1,97 @@
+"""Is there a drift of the wires on the FTDCR v4 robot? A time profile of their common slack.
+
+    python benchmarks/ftdcr_drift.py
+
+The ``drift`` effect (one rate for every wire's length over the recording's time) lowers the FTDCR v4
+held-out and validation errors when it is added, but the loop does not add it (``benchmarks/README.md``,
+*A drift of the wires?*). A drift is a function of time; this script asks whether the data say so.
+Starting from the shipped report's final model it refits, on every sample of ``train.csv``:
+
+- the model with the drift (its rate, and ``val.csv`` predicted with the drift held at the training
+  file's end, as the calibration does);
+- the model with a common slack of every wire per time bin instead (``BINS`` bins of equal length over
+  ``train.csv``, the first at 0; ``val.csv`` takes the last bin's): a steady drift makes the bins' values
+  grow in steps of equal size, a step where the patterns change points at the patterns, not the clock;
+
+and reports how much of the final model's residual on ``train.csv`` is slow in time (its mean over
+``+-W`` minutes around each sample, as a share of the mean square's excess over the noise floor of the
+shipped report). Nothing here feeds a decision of the loop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import _ftdcr  # (benchmarks/, the script's folder)
+import jax.numpy as jnp
+import numpy as np
+
+from tension_zones.calibration import predict_report, rmse
+from tension_zones.calibration._model import RobotModel, data_clock
+from tension_zones.calibration._problem import Problem
+from tension_zones.calibration.effects import BY_NAME, Effect
+from tension_zones.calibration.effects._base import replace
+
+BINS = 8
+ITERATIONS = 80
+
+
+@dataclasses.dataclass(frozen=True)
+class TimeBins(Effect):
+    """A common slack of every wire (mm) per bin of the clock's span (the first bin's is 0)."""
+
+    name = "time_bins"
+    span: float = 1.0  # hours
+
+    def size(self, model, phys0):
+        return BINS - 1
+
+    def on_inputs(self, theta, inputs, model, on):
+        k = jnp.clip(jnp.floor(inputs["hours"] / self.span * BINS), 0, BINS - 1).astype(int)
+        slack = jnp.concatenate([jnp.zeros(1, theta.dtype), theta])[k]
+        return replace(inputs, q=inputs["q"] + slack[:, None])
+
+
+def main():
+    robot, report, train, val = _ftdcr.load()
+    m = report["model"]
+    clock = data_clock(train)
+    bins = TimeBins(span=clock[1] * (1 + 1e-9))
+    blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (BY_NAME["drift"], bins)
+    pb = Problem(RobotModel.of(robot), robot, train.concat(val), blocks, clock=clock)
+    vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
+    sl = pb.spec.slices()
+    theta0 = pb.null.copy()
+    for name, block in zip(m["blocks"], np.split(np.asarray(m["theta"], float),
+                                                 np.cumsum([BY_NAME[n].size(pb.model, pb._phys_np) for n in m["blocks"]])[:-1])):
+        theta0[sl[name]] = block
+    final = [a for a in m["active"] if a != "drift"]
+    print(f"final model: {' + '.join(final)}; train.csv spans {clock[1] * 60:.1f} min", flush=True)
+    for extra in ([], ["drift"], ["time_bins"]):
+        t0 = time.perf_counter()
+        th = pb.fit(theta0, final + extra, (~vmask).astype(float), max_iter=ITERATIONS)
+        r = pb.residuals(th, final + extra)
+        line = f"{' + '.join(['final'] + extra)}: train {rmse(r[~vmask]):.3f} mm, val {rmse(r[vmask]):.3f} mm"
+        if extra == ["drift"]:
+            line += f"; rate {th[sl['drift']][0]:.3f} mm/h"
+        if extra == ["time_bins"]:
+            width = clock[1] * 60 / BINS
+            line += f"; common slack per {width:.1f}-min bin (mm): " + ", ".join(
+                f"{v:+.3f}" for v in np.r_[0.0, th[sl["time_bins"]]])
+            hours = np.clip((train.timestamp - clock[0]) / 3600, 0, clock[1])
+            k = np.minimum((hours / clock[1] * BINS).astype(int), BINS - 1)
+            groups = np.array(train.groups)
+            line += "\n  patterns per bin: " + "; ".join(
+                f"{b}: " + ", ".join(sorted({g.split('_')[1] for g in groups[k == b]})) for b in range(BINS))
+        print(line + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
+    r = predict_report(report, robot, train) - train.p
+    t = (train.timestamp - train.timestamp[0]) / 60.0
+    excess = np.mean(np.sum(r**2, axis=1)) - report["noise_floor_mm"] ** 2
+    for w in (0.5, 1.0, 2.0, 4.0):
+        slow = np.array([r[np.abs(t - ti) <= w].mean(axis=0) for ti in t])
+        print(f"residual averaged over +-{w:g} min: {np.mean(np.sum(slow**2, axis=1)) / excess:.1%} of the excess")
+
+
+if __name__ == "__main__":
+    main()
