@@ -11,11 +11,11 @@ Starting from the shipped report's final model it refits, on every sample of ``t
   file's end, as the calibration does);
 - the model with a common slack of every wire per time bin instead (``BINS`` bins of equal length over
   ``train.csv``, the first at 0; ``val.csv`` takes the last bin's): a steady drift makes the bins' values
-  grow in steps of equal size, a step where the patterns change points at the patterns, not the clock;
+  grow in steps of equal size, a step where the patterns change points at the patterns, not the clock.
+  The recording drives one kind of pattern after another (single tendons, then segments, then pairs),
+  so the bins also say which patterns each holds.
 
-and reports how much of the final model's residual on ``train.csv`` is slow in time (its mean over
-``+-W`` minutes around each sample, as a share of the mean square's excess over the noise floor of the
-shipped report). Nothing here feeds a decision of the loop.
+Nothing here feeds a decision of the loop.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import _ftdcr  # (benchmarks/, the script's folder)
 import jax.numpy as jnp
 import numpy as np
 
-from tension_zones.calibration import predict_report, rmse
+from tension_zones.calibration import rmse
 from tension_zones.calibration._model import RobotModel, data_clock
 from tension_zones.calibration._problem import Problem
 from tension_zones.calibration.effects import BY_NAME, Effect
@@ -85,13 +85,6 @@ def main():
             line += "\n  patterns per bin: " + "; ".join(
                 f"{b}: " + ", ".join(sorted({g.split('_')[1] for g in groups[k == b]})) for b in range(BINS))
         print(line + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
-    r = predict_report(report, robot, train) - train.p
-    t = (train.timestamp - train.timestamp[0]) / 60.0
-    excess = np.mean(np.sum(r**2, axis=1)) - report["noise_floor_mm"] ** 2
-    for w in (0.5, 1.0, 2.0, 4.0):
-        slow = np.array([r[np.abs(t - ti) <= w].mean(axis=0) for ti in t])
-        print(f"residual averaged over +-{w:g} min: {np.mean(np.sum(slow**2, axis=1)) / excess:.1%} of the excess")
-
 
 if __name__ == "__main__":
     main()
