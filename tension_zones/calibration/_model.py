@@ -3,7 +3,8 @@
 A *model* is any hashable object with
 
 * ``physical(robot) -> phys``: the declared physical parameters, a dict pytree;
-* ``inputs(data) -> inputs``: per-sample arrays (sample axis first) derived from a ``Dataset``;
+* ``inputs(data) -> inputs``: per-sample arrays (sample axis first) derived from a ``Dataset``
+  (``inputs(data, clock)`` where the calibration passes the fit data's clock: :func:`elapsed_hours`);
 * ``predict(phys, inputs) -> {"p": (N, 3), "R": (N, 3, 3)}``: the tip for every sample;
 * ``structure``: the static wire counts (:class:`~tension_zones.model.Structure`) the effects read;
 * optionally ``start(n, dtype) -> state`` and ``predict(phys, inputs, state=state)``, which then also
