@@ -13,7 +13,9 @@ Starting from the shipped report's final model it refits, on every sample of ``t
   ``train.csv``, the first at 0; ``val.csv`` takes the last bin's): a steady drift makes the bins' values
   grow in steps of equal size, a step where the patterns change points at the patterns, not the clock.
   The recording drives one kind of pattern after another (single tendons, then segments, then pairs),
-  so the bins also say which patterns each holds.
+  so the bins also say which patterns each holds;
+- the model with a common slack per kind of pattern instead (single tendons at 0; each segment alone;
+  each pair), and with that and the drift together: which of time and pattern the slack goes with.
 
 Nothing here feeds a decision of the loop.
 """
@@ -53,12 +55,40 @@ class TimeBins(Effect):
         return replace(inputs, q=inputs["q"] + slack[:, None])
 
 
+KINDS = ("tendon", "seg1", "seg2", "seg3", "pair12", "pair13", "pair23")
+
+
+def kind(label: str) -> str:
+    """A pattern label's kind (``rep1_pair23_same_dir0`` -> ``pair23``; the single tendons: ``tendon``)."""
+    k = label.split("_")[1]
+    return "tendon" if k.startswith("tendon") else k
+
+
+@dataclasses.dataclass(frozen=True)
+class KindSlack(Effect):
+    """A common slack of every wire (mm) per kind of pattern of ``train.csv`` (the single tendons' 0);
+    ``index`` (N,): each sample's kind (``val.csv``'s samples: -1, no slack)."""
+
+    name = "kind_slack"
+    index: tuple = ()
+
+    def size(self, model, phys0):
+        return len(KINDS) - 1
+
+    def on_inputs(self, theta, inputs, model, on):
+        n = inputs["q"].shape[0]
+        idx = np.r_[self.index, np.full(n - len(self.index), -1)]
+        slack = jnp.concatenate([jnp.zeros(1, theta.dtype), theta, jnp.zeros(1, theta.dtype)])[idx]
+        return replace(inputs, q=inputs["q"] + slack[:, None])
+
+
 def main():
     robot, report, train, val = _ftdcr.load()
     m = report["model"]
     clock = data_clock(train)
     bins = TimeBins(span=clock[1] * (1 + 1e-9))
-    blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (BY_NAME["drift"], bins)
+    index = tuple(KINDS.index(kind(g)) for g in train.groups) + (-1,) * val.n_samples
+    blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (BY_NAME["drift"], bins, KindSlack(index=index))
     pb = Problem(RobotModel.of(robot), robot, train.concat(val), blocks, clock=clock)
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
     sl = pb.spec.slices()
@@ -68,13 +98,17 @@ def main():
         theta0[sl[name]] = block
     final = [a for a in m["active"] if a != "drift"]
     print(f"final model: {' + '.join(final)}; train.csv spans {clock[1] * 60:.1f} min", flush=True)
-    for extra in ([], ["drift"], ["time_bins"]):
+    for extra in ([], ["drift"], ["time_bins"], ["kind_slack"], ["kind_slack", "drift"]):
         t0 = time.perf_counter()
         th = pb.fit(theta0, final + extra, (~vmask).astype(float), max_iter=ITERATIONS)
         r = pb.residuals(th, final + extra)
         line = f"{' + '.join(['final'] + extra)}: train {rmse(r[~vmask]):.3f} mm, val {rmse(r[vmask]):.3f} mm"
-        if extra == ["drift"]:
+        if "drift" in extra:
             line += f"; rate {th[sl['drift']][0]:.3f} mm/h"
+        if "kind_slack" in extra:
+            line = line.replace(", val", ", val (no slack)")
+            line += "; common slack by kind (mm): " + ", ".join(
+                f"{k} {v:+.3f}" for k, v in zip(KINDS, np.r_[0.0, th[sl["kind_slack"]]]))
         if extra == ["time_bins"]:
             width = clock[1] * 60 / BINS
             line += f"; common slack per {width:.1f}-min bin (mm): " + ", ".join(
