@@ -86,7 +86,7 @@ def main():
     robot, report, train, val = _ftdcr.load()
     m = report["model"]
     clock = data_clock(train)
-    bins = TimeBins(span=clock[1] * (1 + 1e-9))
+    bins = TimeBins(span=clock[1])  # (the last sample's bin index is clipped to the last bin)
     index = tuple(KINDS.index(kind(g)) for g in train.groups) + (-1,) * val.n_samples
     blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (BY_NAME["drift"], bins, KindSlack(index=index))
     pb = Problem(RobotModel.of(robot), robot, train.concat(val), blocks, clock=clock)
@@ -117,8 +117,9 @@ def main():
             k = np.minimum((hours / clock[1] * BINS).astype(int), BINS - 1)
             groups = np.array(train.groups)
             line += "\n  patterns per bin: " + "; ".join(
-                f"{b}: " + ", ".join(sorted({g.split('_')[1] for g in groups[k == b]})) for b in range(BINS))
+                f"{b}: " + ", ".join(sorted({kind(g) for g in groups[k == b]}, key=KINDS.index)) for b in range(BINS))
         print(line + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
+
 
 if __name__ == "__main__":
     main()
