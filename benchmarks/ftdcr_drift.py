@@ -15,7 +15,8 @@ Starting from the shipped report's final model it refits, on every sample of ``t
   The recording drives one kind of pattern after another (single tendons, then segments, then pairs),
   so the bins also say which patterns each holds;
 - the model with a common slack per kind of pattern instead (single tendons at 0; each segment alone;
-  each pair), and with that and the drift together: which of time and pattern the slack goes with.
+  each pair), and with that and the drift together: which of time and pattern the slack goes with;
+- the model with a slack per kind of pattern for the wires of each segment: which wires carry it.
 
 Nothing here feeds a decision of the loop.
 """
@@ -67,19 +68,31 @@ def kind(label: str) -> str:
 @dataclasses.dataclass(frozen=True)
 class KindSlack(Effect):
     """A common slack of every wire (mm) per kind of pattern of ``train.csv`` (the single tendons' 0);
-    ``index`` (N,): each sample's kind (``val.csv``'s samples: -1, no slack)."""
+    ``index`` (N,): each sample's kind (``val.csv``'s samples: -1, no slack). ``per_segment``: one slack
+    per kind for the wires of each segment instead (:class:`KindSlackBySegment`)."""
 
     name = "kind_slack"
     index: tuple = ()
+    per_segment: bool = False
 
     def size(self, model, phys0):
-        return len(KINDS) - 1
+        return (len(KINDS) - 1) * (model.structure.n_segments if self.per_segment else 1)
 
     def on_inputs(self, theta, inputs, model, on):
         n = inputs["q"].shape[0]
         idx = np.r_[self.index, np.full(n - len(self.index), -1)]
-        slack = jnp.concatenate([jnp.zeros(1, theta.dtype), theta, jnp.zeros(1, theta.dtype)])[idx]
-        return replace(inputs, q=inputs["q"] + slack[:, None])
+        table = theta.reshape(len(KINDS) - 1, -1)  # (kinds, segments or 1)
+        zero = jnp.zeros((1, table.shape[1]), theta.dtype)
+        slack = jnp.concatenate([zero, table, zero])[idx]  # (N, segments or 1)
+        return replace(inputs, q=inputs["q"] + (slack[:, model.structure.owner] if self.per_segment else slack))
+
+
+@dataclasses.dataclass(frozen=True)
+class KindSlackBySegment(KindSlack):
+    """:class:`KindSlack` with one slack per kind for the wires of each segment."""
+
+    name = "kind_slack_seg"
+    per_segment: bool = True
 
 
 def main():
@@ -88,7 +101,9 @@ def main():
     clock = data_clock(train)
     bins = TimeBins(span=clock[1])  # (the last sample's bin index is clipped to the last bin)
     index = tuple(KINDS.index(kind(g)) for g in train.groups) + (-1,) * val.n_samples
-    blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (BY_NAME["drift"], bins, KindSlack(index=index))
+    blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (
+        BY_NAME["drift"], bins, KindSlack(index=index),
+        KindSlackBySegment(index=index))
     pb = Problem(RobotModel.of(robot), robot, train.concat(val), blocks, clock=clock)
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
     sl = pb.spec.slices()
@@ -98,7 +113,7 @@ def main():
         theta0[sl[name]] = block
     final = [a for a in m["active"] if a != "drift"]
     print(f"final model: {' + '.join(final)}; train.csv spans {clock[1] * 60:.1f} min", flush=True)
-    for extra in ([], ["drift"], ["time_bins"], ["kind_slack"], ["kind_slack", "drift"]):
+    for extra in ([], ["drift"], ["time_bins"], ["kind_slack"], ["kind_slack", "drift"], ["kind_slack_seg"]):
         t0 = time.perf_counter()
         th = pb.fit(theta0, final + extra, (~vmask).astype(float), max_iter=ITERATIONS)
         r = pb.residuals(th, final + extra)
@@ -109,6 +124,12 @@ def main():
             line = line.replace(", val", ", val (no slack)")
             line += "; common slack by kind (mm): " + ", ".join(
                 f"{k} {v:+.3f}" for k, v in zip(KINDS, np.r_[0.0, th[sl["kind_slack"]]]))
+        if extra == ["kind_slack_seg"]:
+            line = line.replace(", val", ", val (no slack)")
+            table = th[sl["kind_slack_seg"]].reshape(len(KINDS) - 1, -1)
+            line += "; slack of each segment's wires by kind (mm): " + ", ".join(
+                f"{k} " + " ".join(f"{v:+.3f}" for v in row) for k, row in zip(KINDS[1:], table))
+            line += "; preload (N): " + " ".join(f"{v:.1f}" for v in th[sl["preload"]])
         if extra == ["time_bins"]:
             width = clock[1] * 60 / BINS
             line += f"; common slack per {width:.1f}-min bin (mm): " + ", ".join(
