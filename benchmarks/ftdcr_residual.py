@@ -58,9 +58,24 @@ def main():
     a = np.sum(r[m] * vel[m] / speed[m, None], axis=1)
     print(f"latency: residual along the motion {a.mean():+.2f} mm (mean over {m.sum()} moving samples, "
           f"median step {np.median(speed[m]):.1f} mm per sample)")
+    # every wire paid out (the single-tendon pulls' ends): nothing holds the robot but its elasticity
+    p_hat = np.concatenate([pred["train"], pred["val"]])
+    home_p, home_hat = np.median(both.p[h["index"]], axis=0), np.median(p_hat[h["index"]], axis=0)
+    slack = np.flatnonzero(both.q.min(axis=1) > 0.0)
+    slack = slack[slack >= BACK]
+    if len(slack):
+        off = both.p[slack] - home_p
+        cos = []
+        for i, o in zip(slack, off):  # (a few dozen samples: a loop over them, not over poses)
+            exc = both.p[i - BACK:i] - home_p
+            e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
+            cos.append(o @ e / max(np.linalg.norm(o) * np.linalg.norm(e), 1e-12))
+        print(f"every wire paid out: {len(slack)} samples; the measured tip {rmse(off):.2f} mm (RMS) from home, "
+              f"toward the largest excursion of the {BACK} samples before (cosine median {np.median(cos):.2f}, "
+              f"least {np.min(cos):.2f}); the model's {rmse(p_hat[slack] - home_hat):.2f} mm, its residual "
+              f"there {rmse(r[slack]):.2f} mm RMS")
     # how far the tip moves from home, measured against predicted (each from its own home tip), by family
     fam = np.concatenate([[pattern_family(g) for g in d.groups] for d in data.values()])
-    p_hat = np.concatenate([pred["train"], pred["val"]])
     dm = np.linalg.norm(both.p - np.median(both.p[h["index"]], axis=0), axis=1)
     dp = np.linalg.norm(p_hat - np.median(p_hat[h["index"]], axis=0), axis=1)
     big = dp > DEFLECTION_MM
