@@ -8,8 +8,9 @@ all of them at once, three ways:
 
 - on the loop's training groups (``Dataset.split``: every fourth pattern group held out), as the loop
   decides: the held-out error, and the share of the final model's held-out excess over the noise floor
-  that the effect explains (the loop adds an effect only where it explains at least about 11-28 % of
-  it, the more the more parameters: the report's ``needed``), i.e. what the loop's evidence says;
+  that the effect explains (the loop adds an effect only where it explains at least a quarter of it
+  near the noise floor, less in proportion further above: 11.3 % here, beside a significant drop),
+  i.e. what the loop's evidence says;
 - on every sample of ``train.csv`` (what the loop's final refit does; ``val.csv`` is only predicted):
   the validation error a user would get had the loop added that effect as well;
 - on ``train.csv`` and ``val.csv`` together (one set of parameters for the one robot): ``val.csv`` is

@@ -24,6 +24,7 @@ import numpy as np
 
 from tension_zones.calibration import home_memory, predict_report, rmse
 from tension_zones.calibration._data import pattern_family
+from tension_zones.calibration._diagnose import previous_excursion
 
 HOME_MM = 0.35
 BACK = 15
@@ -65,19 +66,15 @@ def main():
     slack = slack[slack >= BACK]
     if len(slack):
         off = both.p[slack] - home_p
-        cos = []
-        for i, o in zip(slack, off):  # (a few dozen samples: a loop over them, not over poses)
-            exc = both.p[i - BACK:i] - home_p
-            e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
-            cos.append(o @ e / max(np.linalg.norm(o) * np.linalg.norm(e), 1e-12))
+        cos = np.sum(off * previous_excursion(both.p, slack, home_p, BACK), axis=1) / np.linalg.norm(off, axis=1)
         print(f"every wire paid out: {len(slack)} samples; the measured tip {rmse(off):.2f} mm (RMS) from home, "
               f"toward the largest excursion of the {BACK} samples before (cosine median {np.median(cos):.2f}, "
               f"least {np.min(cos):.2f}); the model's {rmse(p_hat[slack] - home_hat):.2f} mm, its residual "
               f"there {rmse(r[slack]):.2f} mm RMS")
     # how far the tip moves from home, measured against predicted (each from its own home tip), by family
     fam = np.concatenate([[pattern_family(g) for g in d.groups] for d in data.values()])
-    dm = np.linalg.norm(both.p - np.median(both.p[h["index"]], axis=0), axis=1)
-    dp = np.linalg.norm(p_hat - np.median(p_hat[h["index"]], axis=0), axis=1)
+    dm = np.linalg.norm(both.p - home_p, axis=1)
+    dp = np.linalg.norm(p_hat - home_hat, axis=1)
     big = dp > DEFLECTION_MM
     print("deflection from home, measured / predicted (median over predicted deflections above "
           f"{DEFLECTION_MM:.0f} mm): " + ", ".join(f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"

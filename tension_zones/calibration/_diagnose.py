@@ -216,6 +216,18 @@ def score_test(r_h: np.ndarray, J_h: np.ndarray, active_cols: np.ndarray, cand_c
     return {"score": chi2_z(stat, rank), "stat": stat, "dof": rank, "explained_mm2": expl}
 
 
+def previous_excursion(p, index, centre, back: int) -> np.ndarray:
+    """(K, 3) unit directions: for each sample of ``index`` (K,) (at least ``back`` into ``p`` (N, 3),
+    mm), the direction from ``centre`` (3,) of the largest excursion of the ``back`` tips before it,
+    where a memory of the path would leave the robot."""
+    u = np.empty((len(index), 3))
+    for j, i in enumerate(index):  # (a few dozen samples: a loop over them, not over poses)
+        exc = p[i - back:i] - centre
+        e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
+        u[j] = e / max(np.linalg.norm(e), 1e-12)
+    return u
+
+
 def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
     """Hysteresis against drift, from a recording alone (no model).
 
@@ -242,11 +254,7 @@ def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
         raise ValueError(f"{len(home)} home samples (every wire within {home_mm} mm of zero, {back} samples "
                          "into a session): too few to tell memory from drift")
     centre = np.median(p[home], axis=0)
-    u = np.empty((len(home), 3))
-    for j, i in enumerate(home):  # (a few dozen home samples: a loop over them, not over poses)
-        exc = p[i - back:i] - centre
-        e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
-        u[j] = e / max(np.linalg.norm(e), 1e-12)
+    u = previous_excursion(p, home, centre, back)
     # unknowns (c, m, v): 7; rows: 3 per home sample
     K, eye = len(home), np.eye(3)
     A = np.concatenate([np.tile(eye, (K, 1)), u.reshape(-1, 1), np.kron(t[home][:, None], eye)], axis=1)
