@@ -305,7 +305,7 @@ def cmd_calibrate(args) -> None:
 
     from .calibration import DataError, calibrate, load_data, write_report
     from .calibration._report import FILES
-    from .calibration.effects import BY_NAME
+    from .calibration.effects import BY_NAME, OPT_IN
     from .calibration.effects import library as default_library
     from .model import Robot
 
@@ -330,12 +330,17 @@ def cmd_calibrate(args) -> None:
         library = None
         if args.effects is not None:
             names = [e.strip() for e in args.effects.split(",") if e.strip()]
-            known = [e.name for e in default_library(data.frame)]
-            unknown = [n for n in names if n not in known]
+            extra = [n[1:].strip() for n in names if n.startswith("+")]  # added to the default library
+            known = [e.name for e in default_library(data.frame, OPT_IN)]
+            unknown = [n for n in [n.lstrip("+").strip() for n in names] if n not in known]
             if unknown:
                 raise CLIError(f"--effects: unknown effect {unknown[0]!r}; candidates for these data: "
                                f"{', '.join(known)}")
-            library = tuple(BY_NAME[n] for n in names)
+            if extra and len(extra) < len(names):
+                raise CLIError("--effects: either a list of effects or +NAME additions to the default library, "
+                               "not both")
+            library = (default_library(data.frame, [n for n in extra if n in OPT_IN]) if extra
+                       else tuple(BY_NAME[n] for n in names))
         log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
         res = calibrate(data, robot, validate=val, library=library,
                         holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust, log=log,
@@ -414,7 +419,8 @@ def _add_calibrate_parser(sub) -> None:
                    help="the data files' reader: model (MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
                         "servo_<id>_mm recordings)")
     c.add_argument("--validate", help="a second recording of the same robot, only predicted after the selection")
-    c.add_argument("--effects", help="candidate effects, comma-separated (default: the whole library)")
+    c.add_argument("--effects", help="candidate effects, comma-separated (default: the library but for the opt-in "
+                   "bending_friction); +NAME adds an opt-in effect to the default library, e.g. +bending_friction")
     c.add_argument("--holdout", type=float, default=None,
                    help="fraction held out for the decisions (default 0.25: the tail of the acquisition "
                         "order, or every 4th pattern group of a labelled recording)")

@@ -198,6 +198,7 @@ class RobotTruth:
     clearance: tuple = (0.0, 0.0)  # mm per rad of bending: a wire's path shortened in its own segment, the ones before
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
     wire_drift: float = 0.0  # mm per hour: every wire lengthens at this rate on the recordings' clock
+    bending_friction: tuple = ()  # per segment, N mm: Coulomb friction of the bending (hysteresis)
     noise: float = 0.05
     pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
 
@@ -435,6 +436,23 @@ def robot_patterns(design: dict, rng, val: bool = False, servos=None, steps: int
     return out
 
 
+def _stick(rob, x, q, direction, prev, h):
+    """The bending friction's step: the previous bending ``prev`` kept, piece by piece, unless the
+    elastic moment pulling it back to the equilibrium ``x`` (the backbone's and the taut wires'
+    stiffness there, each wire at its mean friction factor, times their difference) exceeds ``h``;
+    then the bending where that moment is ``h``."""
+    taut = rob.stretch(x, q) > 1e-9  # the solve's round-off: a wire at its slack length is slack
+    T = rob.factors(x, direction)
+    t = np.array([T[k, :rob.crossed[k]].mean() for k in range(rob.N)])
+    K = np.diag(np.repeat(rob.EI / rob.L, 2)) + rob.A.T @ ((t * rob.k * taut)[:, None] * rob.A)
+    mom = (K @ (prev - x)).reshape(-1, 2)
+    size = np.linalg.norm(mom, axis=1)
+    if np.all(size <= h):
+        return prev
+    mom = mom * np.where(size > h, h / np.where(size > h, size, 1.0), 1.0)[:, None]
+    return x + np.linalg.solve(K, mom.reshape(-1))
+
+
 def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
     """Measured tip positions (T, 3) in the tracker frame for the patterns' commands, in order;
     ``hours`` (T,): each sample's time on the wires' drift clock (default 0)."""
@@ -444,6 +462,9 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
     play = np.zeros(rob.N) if len(truth.play) == 0 else np.asarray(truth.play, float)
     R_reg = Rotation.from_rotvec(np.radians(truth.registration_deg))
     q_eff, last_dir, x = Q[0].copy(), np.zeros(rob.N), np.zeros(2 * rob.S)
+    xb = x  # the bending with the bending's friction (its memory)
+    friction_h = np.repeat(np.asarray(truth.bending_friction, float), truth.pieces) \
+        if len(truth.bending_friction) else np.zeros(rob.S)
     P = np.empty((len(Q), 3))
     for i in range(len(Q)):
         if i > 0:
@@ -454,8 +475,10 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
                 q_eff[k] = Q[i, k] - play[k] / 2
             elif Q[i, k] < q_eff[k] - play[k] / 2:
                 q_eff[k] = Q[i, k] + play[k] / 2
-        x = rob.equilibrium(q_eff + truth.wire_drift * (0.0 if hours is None else hours[i]), last_dir, x)
-        ps, Rs, _, _ = rob.chain(x.reshape(rob.S, 2))
+        q_now = q_eff + truth.wire_drift * (0.0 if hours is None else hours[i])
+        x = rob.equilibrium(q_now, last_dir, x)
+        xb = x if i == 0 or not np.any(friction_h) else _stick(rob, x, q_now, last_dir, xb, friction_h)
+        ps, Rs, _, _ = rob.chain(xb.reshape(rob.S, 2))
         P[i] = R_reg.apply(ps[-1] + Rs[-1] @ np.asarray(truth.marker, float)) + np.asarray(truth.translation)
     s = np.arange(len(Q)) / len(Q)
     P[:, 0] += truth.drift_mm * np.sin(2 * np.pi * 1.5 * s)

@@ -15,6 +15,7 @@ from simulator import ROBOT, RobotTruth, write_robot_set
 import tension_zones as tz
 from tension_zones.calibration import calibrate, compilations, read_opencr
 from tension_zones.calibration._report import markdown
+from tension_zones.calibration.effects import OPT_IN, library
 from tension_zones.cli import main
 
 EFFECTS = {
@@ -30,26 +31,30 @@ EFFECTS = {
     "registration": RobotTruth(registration_deg=(1.0, -1.5, 4.0)),
     "routing_twist": RobotTruth(twist_deg=(8.0,)),
     "clearance": RobotTruth(clearance=(0.1, 0.3)),
+    "bending_friction": RobotTruth(bending_friction=(1.0, 1.5)),
 }
 
 
-def run(folder, name, truth, seed=3, steps=10):
+def run(folder, name, truth, seed=3, steps=10, opt_in=()):
     train_csv, val_csv, design = write_robot_set(folder, name, truth, seed=seed, steps=steps)
     robot = tz.Robot.from_json(design)
     train = read_opencr(train_csv, n_wires=robot.n_wires)
     val = read_opencr(val_csv, n_wires=robot.n_wires, servo_ids=train.servo_ids)
     before = compilations()
-    res = calibrate(train, robot, validate=val)
+    res = calibrate(train, robot, validate=val, library=library(train.frame, opt_in))
     rep = res.to_json()
     # adding, removing, refitting effects never recompiles: one program, and the rod's where the
-    # variable curvature was scored (only once the model had a load); where the loop's fits ran on
+    # variable curvature was scored (only once the model had a load), the memory's where the bending
+    # friction was (with the rod, if that was in the model then); where the loop's fits ran on
     # their own rows (a large recording), the refits on every sample (the final model's, and with a
     # validation file every accepted model's) have more rows: one more program for each variant among
-    # those models (constant curvature, the rod)
+    # those models (constant curvature or the rod, with or without the memory)
     rod = any(c["name"] == "variable_curvature" and "not_scored" not in c for c in rep["candidates"])
+    memory = {"variable_curvature" in step["effects"] for step in rep["steps"]} if any(
+        c["name"] == "bending_friction" for c in rep["candidates"]) else set()
     own_rows = res.problem._rows < res.problem.n_padded
-    variants = {"variable_curvature" in step["effects"] for step in rep["steps"]}
-    assert compilations() - before <= 1 + rod + own_rows * len(variants)
+    variants = {("variable_curvature" in step["effects"], "bending_friction" in step["effects"]) for step in rep["steps"]}
+    assert compilations() - before <= 1 + rod + len(memory) + own_rows * len(variants)
     return rep
 
 
@@ -59,7 +64,7 @@ def names(rep):
 
 @pytest.mark.parametrize("effect", list(EFFECTS))
 def test_each_effect_alone_is_named_and_validation_reaches_the_noise(tmp_path, effect):
-    rep = run(tmp_path, effect, EFFECTS[effect])
+    rep = run(tmp_path, effect, EFFECTS[effect], opt_in=[n for n in OPT_IN if n == effect])
     assert names(rep) == [effect]
     floor = rep["noise_floor_mm"]
     assert rep["rmse_before_mm"] > 1.5 * floor  # the effect mattered
@@ -80,6 +85,30 @@ def test_nominal_robot_gets_nothing(tmp_path):
     np.testing.assert_allclose(list(fitted["offset"].values()), [2.0, -3.0, 5.0], atol=0.3)
     np.testing.assert_allclose(list(fitted["pattern_rotation"].values()), np.array([12.0, -20.0]) + 4.0, atol=0.5)
     np.testing.assert_allclose(list(fitted["backbone_EI"].values()), [1.2 * 1500.0, 0.8 * 3000.0], rtol=0.1)
+
+
+@pytest.mark.parametrize("case", ["nominal", "backlash"])
+def test_with_the_bending_friction_a_candidate_nothing_else_changes(tmp_path, case):
+    """The opt-in hysteresis beside the library: nothing added to a nominal robot, and the play of the
+    wires (the other hysteresis) still named as such."""
+    truth = RobotTruth() if case == "nominal" else EFFECTS["backlash"]
+    rep = run(tmp_path, case, truth, seed=5 if case == "nominal" else 3, opt_in=["bending_friction"])
+    assert names(rep) == ([] if case == "nominal" else ["backlash"])
+    assert any(c["name"] == "bending_friction" for c in rep["candidates"])
+
+
+def test_the_command_line_adds_the_bending_friction_and_recovers_it(tmp_path):
+    truth = EFFECTS["bending_friction"]
+    train, val, design = write_robot_set(tmp_path, "bf", truth, seed=11)
+    out = tmp_path / "out"
+    assert main(["calibrate", str(train), "--format", "opencr", "--design", str(design), "--validate", str(val),
+                 "--effects", "+bending_friction", "--out", str(out), "--quiet"]) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert names(rep) == ["bending_friction"]
+    got = np.array(list(rep["parameters"]["fitted"]["bending_friction"].values()))
+    std = np.array(list(rep["parameters"]["std"]["bending_friction"].values()))
+    assert np.all(np.abs(got - np.array(truth.bending_friction)) < 5 * std + 0.05)
+    assert rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
 
 
 def test_an_effect_outside_the_library_is_flagged_not_misnamed(tmp_path):

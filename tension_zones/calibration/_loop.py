@@ -330,11 +330,17 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 return False
             # effects that switch the solver are scored with their solver on (at null: the same model)
             switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
+            # a memory's (the samples before) is scored in a program of its own: the rod's with it
+            # would solve every sample for every score, not only the held-out ones
+            recalled = [n for n in switched if getattr(blocks[n], "memory", False)]
+            switched = [n for n in switched if n not in recalled]
             r = pb.residuals(theta, active)
             if switched:
                 run.warmed("rod")  # a worker compiling the rod's program: load it rather than compile it
             # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
             r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(held))
+            for name in recalled:
+                J_held[..., sl[name]] = pb.jacobian(theta, active + [name], samples=np.flatnonzero(held))[1][..., sl[name]]
             active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
             wts = glitch_weights(r_held, sigma) if robust else None
             # the score test's null is "what is left is noise"; far above the noise floor, what is left is

@@ -24,7 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..model import Robot, Structure
-from ..model._equilibrium import cold_state, piece_lengths, solve_warm
+from ..model._equilibrium import (
+    bending_memory,
+    cold_state,
+    elastic_stiffness,
+    piece_lengths,
+    solve_warm,
+)
 from ..model._robot import chain_tip
 from ._data import Dataset
 
@@ -80,6 +86,7 @@ def _declared(robot: Robot) -> dict:
     eagerly, its operations compiled one at a time, some 15 of them, 0.3-0.5 s in every process)."""
     phys = robot.params()
     phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
+    phys["bending_friction"] = jnp.zeros_like(phys["EI"])  # none declared: an effect (bending_friction)
     return phys
 
 
@@ -88,9 +95,12 @@ class RobotModel:
     """Any robot of the package (one segment or many) for the loop; hashable (only its wire counts and
     the pieces per segment: 1, constant curvature; more, the rod model). The declared
     ``curvature_freedom`` is 0 here: a model in pieces is constant curvature until the
-    ``variable_curvature`` effect frees it."""
+    ``variable_curvature`` effect frees it. With ``memory`` the bending's friction
+    (``phys["bending_friction"]``, :func:`~tension_zones.model._equilibrium.bending_memory`) acts
+    along the acquisition order: each prediction is then of the whole recording (``path``)."""
 
     structure: Structure
+    memory: bool = False
 
     @classmethod
     def of(cls, robot: Robot, pieces: int = 1) -> RobotModel:
@@ -98,7 +108,17 @@ class RobotModel:
 
     def with_pieces(self, pieces: int) -> RobotModel:
         """The same robot solved with ``pieces`` per segment (the calibration's rod variant)."""
-        return RobotModel(dataclasses.replace(self.structure, pieces=int(pieces)))
+        return dataclasses.replace(self, structure=dataclasses.replace(self.structure, pieces=int(pieces)))
+
+    def with_memory(self) -> RobotModel:
+        """The same robot with the bending's friction: a prediction depends on the samples before."""
+        return dataclasses.replace(self, memory=True)
+
+    @property
+    def path(self) -> bool:
+        """Whether a sample's prediction depends on the samples before it (then :meth:`predict` takes
+        the whole recording, in order)."""
+        return self.memory
 
     def physical(self, robot: Robot) -> dict:
         if robot.n_wires_per_segment != self.structure.n_wires_per_segment:
@@ -138,6 +158,11 @@ class RobotModel:
         s0 = self.start(inputs["q"].shape[0], inputs["q"].dtype) if state is None else state
         B, s1 = jax.vmap(lambda q, f, d, s: solve_warm(phys, st, q, f, d, s, loaded=loaded))(
             inputs["q"], inputs["f"], inputs["direction"], s0)
+        if self.memory:
+            K = jax.vmap(lambda q, f, d, b: elastic_stiffness(phys, st, q, f, d, b, loaded))(
+                inputs["q"], inputs["f"], inputs["direction"], B)
+            h = jnp.repeat(phys["bending_friction"], st.pieces)
+            B = bending_memory(B.reshape(B.shape[0], -1), K, h, inputs["reset"]).reshape(B.shape)
         lengths = piece_lengths(phys, st)
         p, R = jax.vmap(lambda b: chain_tip(lengths, b))(B)
         return {"p": p, "R": R} if state is None else {"p": p, "R": R, "state": s1}

@@ -72,9 +72,12 @@ def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None, state=None):
     those samples (after the input stage, which may depend on the whole sequence, e.g. backlash).
     ``state``: the model's warm start for those samples (``_model``), then ``"state"`` is in the result."""
     phys, inputs, parts, on = stages(spec, theta, on, phys0, inputs)
-    if rows is not None:
+    path = getattr(spec.model, "path", False)  # a prediction that needs the samples before it: all, then rows
+    if rows is not None and not path:
         inputs = jax.tree_util.tree_map(lambda a: a[rows], inputs)
     out = spec.model.predict(phys, inputs) if state is None else spec.model.predict(phys, inputs, state=state)
+    if rows is not None and path:
+        out = {k: (v if k == "state" else v[rows]) for k, v in out.items()}
     for blk, th in zip(spec.blocks, parts):
         out = blk.on_outputs(th, out, spec.model, on)
     return out
@@ -95,7 +98,8 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
         out = predict_theta(spec, th, on, phys0, inputs, rows, state=s if warm else None)
         return out["p"] - y[rows], out["state"] if warm else s
 
-    state = spec.model.start(rows.shape[0], y.dtype) if warm else ()
+    n_state = y.shape[0] if getattr(spec.model, "path", False) else rows.shape[0]  # a path model solves all
+    state = spec.model.start(n_state, y.dtype) if warm else ()
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
                                cols=cols, n_cols=n_cols, state=state)
 
@@ -266,19 +270,23 @@ class Problem:
         self.lo = np.concatenate([b.bounds(model, phys_np)[0] for b in blocks])
         self.hi = np.concatenate([b.bounds(model, phys_np)[1] for b in blocks])
         self._phys_np = phys_np
-        self._specs = {1: self.spec}
+        self._specs = {(1, False): self.spec}
         self._rows = None  # the rows of the fits' own program, once one has run
 
     def spec_for(self, active) -> Spec:
         """The program for the model made of ``active``: the model itself, or its variant in pieces
-        where an active block needs them (``Effect.pieces_for``; the parameter vector is the same)."""
+        where an active block needs them (``Effect.pieces_for``), with the memory of the samples
+        before where one needs it (``Effect.memory``); the parameter vector is the same."""
         pieces = max((b.pieces_for(self.model) for b in self.spec.blocks if b.name in active), default=1)
         own = getattr(getattr(self.model, "structure", None), "pieces", 1)
-        if pieces <= own or not hasattr(self.model, "with_pieces"):
-            return self.spec
-        if pieces not in self._specs:
-            self._specs[pieces] = dataclasses.replace(self.spec, model=self.model.with_pieces(pieces))
-        return self._specs[pieces]
+        pieces = pieces if pieces > own and hasattr(self.model, "with_pieces") else 1
+        memory = (any(getattr(b, "memory", False) for b in self.spec.blocks if b.name in active)
+                  and hasattr(self.model, "with_memory"))
+        if (pieces, memory) not in self._specs:
+            model = self.model.with_pieces(pieces) if pieces > 1 else self.model
+            model = model.with_memory() if memory else model
+            self._specs[pieces, memory] = dataclasses.replace(self.spec, model=model)
+        return self._specs[pieces, memory]
 
     def cost(self, active) -> float:
         """The relative cost of a fit of the model made of ``active``: its segments' pieces (the rod's
@@ -326,7 +334,7 @@ class Problem:
         fit's. Returns the thread, or None."""
         w = np.zeros(self.n_padded)
         w[: self.n] = weights
-        rows, w = self._fit_rows(w)
+        rows, w = self._fit_rows(w, active)
         free = self.mask(active)
         cols, n_cols = self._fit_cols(free)
         return engine_ahead(*self._args(self.null, active, free, rows, w, np.inf, 0, cols, n_cols))
@@ -335,9 +343,10 @@ class Problem:
         theta0 = np.clip(np.asarray(theta0, float), self.lo, self.hi)
         w = np.zeros(self.n_padded)
         w[: self.n] = weights  # padded samples never count
-        rows, w = self._fit_rows(w)
+        rows, w = self._fit_rows(w, active)
         cols, n_cols = self._fit_cols(free)
-        self._rows = self._rows or len(rows)  # evaluations from now on run this program
+        if not self._path(active):
+            self._rows = self._rows or len(rows)  # evaluations from now on run this program
         return self._call(theta0, active, free, rows, w, huber_c, max_iter, cols, n_cols)[0]
 
     def _evaluate(self, theta, active, jacobian=True, samples=None):
@@ -347,10 +356,10 @@ class Problem:
         compiles one program per model and row count. Every column is differentiated, or none for
         the residuals alone (the engine's column count is data: ``_lsq``'s ``n_cols``). ``samples``
         (K,): only those (path-dependent inputs are still formed over the whole recording), (K, 3)
-        and (K, 3, P)."""
+        and (K, 3, P). A model with memory (:meth:`_path`) runs on every sample in one call."""
         theta = np.clip(np.asarray(theta, float), self.lo, self.hi)
         P, d = self.null.shape[0], self.y.shape[1]
-        k = self._rows or self.n_padded
+        k = self.n_padded if self._path(active) else (self._rows or self.n_padded)
         if samples is None:
             want = np.arange(self.n)
             rows = np.minimum(np.arange(-(-self.n_padded // k) * k), self.n_padded - 1).reshape(-1, k)
@@ -366,11 +375,20 @@ class Problem:
                 J[i * k:(i + 1) * k] = out[4]
         return r[:len(want)], (J[:len(want)] if jacobian else None)
 
-    def _fit_rows(self, w) -> tuple[np.ndarray, np.ndarray]:
+    def _path(self, active) -> bool:
+        """Whether the model made of ``active`` predicts a sample from the samples before it (a memory:
+        ``Effect.memory``): it then solves every sample whatever rows are asked for."""
+        return bool(getattr(self.spec_for(active).model, "path", False))
+
+    def _fit_rows(self, w, active=()) -> tuple[np.ndarray, np.ndarray]:
         """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most
         ``FIT_ROWS_SHARE`` (a hold-out, a validation file), only its weighted ones (padded to ``FIT_PAD``
         with the last at weight 0): each iteration then costs their share. Once a fit has run, a fit
-        of no more rows pads to that fit's count (the same program). Returns the rows and their weights."""
+        of no more rows pads to that fit's count (the same program). A model with memory solves every
+        sample anyway: all rows, one program for its fits and evaluations. Returns the rows and their
+        weights."""
+        if self._path(active):
+            return np.arange(self.n_padded), w
         live = np.flatnonzero(w > 0)
         k = len(live) + (-len(live)) % FIT_PAD
         if self._rows and len(live) <= self._rows:

@@ -43,6 +43,12 @@ slower (1000 FTDCR v4 samples, 4 pieces, interleaved runs: 58-62 against 52-58 u
 54-58, as before the clearance), and the solves with it were slower too (one run each: 153 against
 136 us; 26 against 24 us at constant curvature).
 
+**Friction of the bending** (hysteresis) is not part of one sample's solve: it depends on the
+bending before. :func:`bending_memory` applies it to a recording's equilibria in acquisition order,
+a play operator on each piece's bending in the metric of the elastic stiffness :func:`elastic_stiffness`
+(the backbone's and the taut wires': the load's curvature, small and possibly indefinite, left out,
+which also keeps the derivatives cheap).
+
 **Solver.** Damped Newton on ``V`` (friction frozen at the iterate, above): the backbone's and the
 wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
 backtracking line search over ten step sizes, the largest that satisfies Armijo's condition taken.
@@ -548,6 +554,55 @@ def segment_bending(B, structure: Structure):
     """``(S, 2)`` each segment's total bending vector from the pieces' ``B`` (P, 2) (their sum: exact
     for constant curvature, the mean curvature times the length for the rod)."""
     return B.reshape(structure.n_segments, structure.pieces, 2).sum(axis=1)
+
+
+def elastic_stiffness(phys, structure: Structure, q, f, direction, B, loaded=None):
+    """The backbone's and the taut wires' stiffness (2P, 2P) at the bending ``B`` (P, 2) of one sample
+    (the Newton step's matrix: symmetric, positive definite; each taut wire at its mean friction
+    factor; the load's curvature left out). Where every wire of a segment is slack it is that
+    backbone's ``EI / L`` alone. Arguments as in :func:`solve`."""
+    dt = jnp.result_type(phys["length"], q, float)
+    q, f = jnp.asarray(q, dt), jnp.asarray(f, dt)
+    direction = jnp.zeros_like(q) if direction is None else jnp.asarray(direction, dt)
+    loaded = jnp.zeros((), bool) if loaded is None else loaded  # the load's curvature is not used
+    sm = _Sample(phys, structure, q, f, direction, loaded)
+    x = jnp.asarray(B, dt).reshape(-1)
+    return sm.newton_matrix(x, sm.factor(x))
+
+
+def bending_memory(X, K, h, reset=None):
+    """Coulomb friction of the bending (hysteresis): each piece's bending sticks until the elastic
+    moment that pulls it back to equilibrium exceeds a friction moment ``h``.
+
+    ``X`` (n, 2P) the equilibria without that friction, in acquisition order; ``K`` (n, 2P, 2P) the
+    stiffness there (:func:`elastic_stiffness`: symmetric, positive definite); ``h`` (P,) each piece's friction moment (N mm, >= 0);
+    ``reset`` (n,) 0/1 where a recording starts (no memory of what came before) -> (n, 2P) the bending
+    with friction. A play operator in moment space: the moment ``m = K (x_prev - x*)`` of the previous
+    bending about this sample's equilibrium is clamped, piece by piece, to the norm ``h``, and
+    ``x = x* + K^-1 m_clamped`` (``x_prev`` kept where ``|m| <= h`` everywhere). Where a segment's
+    wires are taut its stiffness is the wires' and the play is small; where they are all slack it is
+    the backbone's alone and the robot keeps most of its last shape. It is the incremental minimum of
+    ``V + h |x - x_prev|`` for a quadratic ``V`` of isotropic stiffness per piece (for another, its
+    first-order approximation). Written with double ``where`` so that at ``h = 0`` (``x = x*``) the
+    derivative with respect to ``h`` is ``K^-1`` times the unit moment (what the score test needs),
+    finite where two samples are the same."""
+    n, P = X.shape[0], h.shape[0]
+    reset = jnp.zeros(n, X.dtype) if reset is None else jnp.asarray(reset, X.dtype)
+    K_inv = jnp.linalg.inv(K)  # batched, outside the sequential scan: its steps are then a few products
+
+    def step(prev, xs):
+        x, k, k_inv, r = xs
+        prev = jnp.where(r > 0, x, prev)
+        mom = (k @ (prev - x)).reshape(P, 2)
+        sq = jnp.sum(mom**2, axis=-1)
+        moving = sq > h**2
+        norm = jnp.sqrt(jnp.where(moving, sq, 1.0))
+        scale = jnp.where(moving, h / norm, 1.0)
+        cur = jnp.where(jnp.any(moving), x + k_inv @ (mom * scale[:, None]).reshape(-1), prev)
+        return cur, cur
+
+    _, out = jax.lax.scan(step, X[0], (X, K, K_inv, reset))
+    return out
 
 
 # --------------------------------------------------------------------------------------------

@@ -36,6 +36,9 @@ class Effect:
     #: True for an effect with no sensitivity unless the model carries a load (tip force or weight):
     #: the loop does not score it while the model has none (its score would be exactly 0)
     needs_load = False
+    #: True for an effect whose state depends on the samples before (a hysteresis of the solved
+    #: bending): while it is on, the model's ``with_memory`` variant predicts the whole recording
+    memory = False
 
     # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
     def size(self, model, phys0) -> int:
