@@ -575,9 +575,9 @@ def bending_memory(X, K, h, reset=None):
     moment that pulls it back to equilibrium exceeds a friction moment ``h``.
 
     ``X`` (n, 2P) the equilibria without that friction, in acquisition order; ``K`` (n, 2P, 2P) the
-    stiffness there (:func:`elastic_stiffness`: symmetric, positive definite); ``h`` (P,) each piece's friction moment (N mm, >= 0);
-    ``reset`` (n,) 0/1 where a recording starts (no memory of what came before) -> (n, 2P) the bending
-    with friction. A play operator in moment space: the moment ``m = K (x_prev - x*)`` of the previous
+    stiffness there (:func:`elastic_stiffness`: symmetric, positive definite); ``h`` (P,) each piece's
+    friction moment (N mm, >= 0); ``reset`` (n,) 0/1 where a recording starts (no memory of what came
+    before) -> (n, 2P) the bending with friction. A play operator in moment space: the moment ``m = K (x_prev - x*)`` of the previous
     bending about this sample's equilibrium is clamped, piece by piece, to the norm ``h``, and
     ``x = x* + K^-1 m_clamped`` (``x_prev`` kept where ``|m| <= h`` everywhere). Where a segment's
     wires are taut its stiffness is the wires' and the play is small; where they are all slack it is
@@ -588,7 +588,7 @@ def bending_memory(X, K, h, reset=None):
     finite where two samples are the same."""
     n, P = X.shape[0], h.shape[0]
     reset = jnp.zeros(n, X.dtype) if reset is None else jnp.asarray(reset, X.dtype)
-    K_inv = jnp.linalg.inv(K)  # batched, outside the sequential scan: its steps are then a few products
+    K_inv = jnp.linalg.inv(K)  # batched, outside the sequential scan
 
     def step(prev, xs):
         x, k, k_inv, r = xs
