@@ -66,13 +66,19 @@ def _on_params(spec: Spec, parts, on, phys):
     return phys
 
 
+def _has_path(model) -> bool:
+    """Whether ``model`` predicts a sample from the samples before it (a memory, ``RobotModel.path``):
+    it then solves every sample, whatever rows are asked for."""
+    return bool(getattr(model, "path", False))
+
+
 def predict_theta(spec: Spec, theta, on, phys0, inputs, rows=None, state=None):
     """The tip (``{"p", "R"}``, sample axis first) for the parameter vector ``theta`` and the blocks
     ``on`` (B,) 0/1, all blocks applied in stages (parameters, inputs, outputs); ``rows`` (K,): only
     those samples (after the input stage, which may depend on the whole sequence, e.g. backlash).
     ``state``: the model's warm start for those samples (``_model``), then ``"state"`` is in the result."""
     phys, inputs, parts, on = stages(spec, theta, on, phys0, inputs)
-    path = getattr(spec.model, "path", False)  # a prediction that needs the samples before it: all, then rows
+    path = _has_path(spec.model)  # a prediction that needs the samples before it: all, then rows
     if rows is not None and not path:
         inputs = jax.tree_util.tree_map(lambda a: a[rows], inputs)
     out = spec.model.predict(phys, inputs) if state is None else spec.model.predict(phys, inputs, state=state)
@@ -98,7 +104,7 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
         out = predict_theta(spec, th, on, phys0, inputs, rows, state=s if warm else None)
         return out["p"] - y[rows], out["state"] if warm else s
 
-    n_state = y.shape[0] if getattr(spec.model, "path", False) else rows.shape[0]  # a path model solves all
+    n_state = y.shape[0] if _has_path(spec.model) else rows.shape[0]  # a path model solves all
     state = spec.model.start(n_state, y.dtype) if warm else ()
     return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
                                cols=cols, n_cols=n_cols, state=state)
@@ -378,7 +384,7 @@ class Problem:
     def _path(self, active) -> bool:
         """Whether the model made of ``active`` predicts a sample from the samples before it (a memory:
         ``Effect.memory``): it then solves every sample whatever rows are asked for."""
-        return bool(getattr(self.spec_for(active).model, "path", False))
+        return _has_path(self.spec_for(active).model)
 
     def _fit_rows(self, w, active=()) -> tuple[np.ndarray, np.ndarray]:
         """The samples a fit evaluates: all, or on a large recording of which the fit weighs at most

@@ -36,8 +36,8 @@ NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotatio
 EXCLUDED = {"base": ("offset",), "tracker": ()}
 #: Candidates only where asked for (``library(frame, opt_in=...)``, the CLI's ``--effects +NAME``): a
 #: model with the bending's memory solves the whole recording at every evaluation. On FTDCR v4 the loop
-#: names it (held out 3.66 -> 3.44 mm) but runs 4-6x as long (the rod beside it, which the loop scores
-#: every round there, compiles for about 60 s and costs 18 s a short refit).
+#: names it (held out 3.66 -> 3.44 mm) but the CLI took 382 s against 86 s (the rod beside it, which the
+#: loop scores every round there, compiles for about 60 s and costs 18 s a short refit).
 OPT_IN = ("bending_friction",)
 BY_NAME = {e.name: e for e in ALL}
 
