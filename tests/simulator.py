@@ -199,6 +199,7 @@ class RobotTruth:
     drift_mm: float = 0.0  # outside the library: a slow tracker drift along the acquisition
     wire_drift: float = 0.0  # mm per hour: every wire lengthens at this rate on the recordings' clock
     bending_friction: tuple = ()  # per segment, N mm: Coulomb friction of the bending (hysteresis)
+    compression: tuple = ()  # per segment, mm/N: the backbone's axial compliance under the wires' tension
     noise: float = 0.05
     pieces: int = 1  # constant-curvature pieces per segment: 1, constant curvature; many, an elastic rod
 
@@ -284,23 +285,51 @@ class _Robot:
         for k in range(self.N):
             for j in range(self.crossed[k]):
                 self.C[k, j] = cl[0] if j // m == self.owner[k] else cl[1]
+        # the backbone's compression: piece j shortens by a_j times the tension of the wires through it
+        self.a = np.repeat(np.asarray(truth.compression, float) / m, m) if len(truth.compression) else np.zeros(self.S)
+        self.X = np.zeros((self.N, self.S))
+        for k in range(self.N):
+            self.X[k, :self.crossed[k]] = 1.0
+
+    def compression(self, s0):
+        """The pieces' shortening ``e`` (S,) for the rigid backbone's stretch ``s0``: the minimum over
+        ``e`` of ``sum_k k_k max(s0 - X e, 0)^2 / 2 + sum_j e_j^2 / (2 a_j)``, by active sets in ``e``
+        (the set of taut wires, iterated until it stays)."""
+        live = self.a > 0
+        e = np.zeros(self.S)
+        if not live.any():
+            return e
+        taut = s0 > 0
+        for _ in range(50):
+            Xl = self.X[:, live]
+            W = self.k * taut
+            M = np.diag(1.0 / self.a[live]) + Xl.T @ (W[:, None] * Xl)
+            e[live] = np.linalg.solve(M, Xl.T @ (W * s0))
+            new = s0 - self.X @ e > 0
+            if np.array_equal(new, taut):
+                break
+            taut = new
+        return e
 
     def stretch(self, x, q, short=None):
         """Each wire's stretch (N,): the routing's length change, less the clearance's shortening
         (``short``, frozen, or else at ``x``)."""
         if short is None:
             short = self.C @ np.hypot(*x.reshape(self.S, 2).T)
-        return self.A @ x - q + self.pre / self.k - short
+        s0 = self.A @ x - q + self.pre / self.k - short
+        return s0 - self.X @ self.compression(s0)
 
-    def chain(self, B):
-        """Disk poses along the chain (lists of S + 1) and the weight's quadrature points."""
+    def chain(self, B, lengths=None):
+        """Disk poses along the chain (lists of S + 1) and the weight's quadrature points; ``lengths``
+        (S,): the pieces' (compressed) lengths, default their own."""
         p, R = np.zeros(3), np.eye(3)
         ps, Rs, pts, wts = [p], [R], [], []
+        L = self.L if lengths is None else lengths
         for j in range(self.S):
-            s = 0.5 * self.L[j] * (_GL[0] + 1.0)
-            pts.append(p + _arc_points(self.L[j], B[j], s) @ R.T)
-            wts.append(0.5 * self.L[j] * _GL[1])
-            pj, Rj = _arc(self.L[j], B[j], self.L[j])
+            s = 0.5 * L[j] * (_GL[0] + 1.0)
+            pts.append(p + _arc_points(L[j], B[j], s) @ R.T)
+            wts.append(0.5 * L[j] * _GL[1])
+            pj, Rj = _arc(L[j], B[j], L[j])
             p, R = p + R @ pj, R @ Rj
             ps.append(p)
             Rs.append(R)
@@ -338,7 +367,10 @@ class _Robot:
         arms are the routing's ``A`` either way)."""
         s = self.stretch(x, q, short)
         E = np.repeat(self.EI / self.L, 2)
-        V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2)
+        tau = self.k * np.maximum(s, 0.0)
+        e = self.a * (self.X.T @ tau)  # the backbone's shortening stores e^2 / (2 a)
+        V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2) \
+            + 0.5 * np.sum(e * (self.X.T @ tau))
         g = E * x + self.A.T @ (t * self.k * np.maximum(s, 0.0))
         if self.loaded:
             h, n = 1e-6, len(x)
@@ -478,7 +510,8 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
         q_now = q_eff + truth.wire_drift * (0.0 if hours is None else hours[i])
         x = rob.equilibrium(q_now, last_dir, x)
         xb = x if i == 0 or not np.any(friction_h) else _stick(rob, x, q_now, last_dir, xb, friction_h)
-        ps, Rs, _, _ = rob.chain(xb.reshape(rob.S, 2))
+        e = rob.a * (rob.X.T @ (rob.k * np.maximum(rob.stretch(xb, q_now), 0.0)))  # the backbone's shortening
+        ps, Rs, _, _ = rob.chain(xb.reshape(rob.S, 2), rob.L - e)
         P[i] = R_reg.apply(ps[-1] + Rs[-1] @ np.asarray(truth.marker, float)) + np.asarray(truth.translation)
     s = np.arange(len(Q)) / len(Q)
     P[:, 0] += truth.drift_mm * np.sin(2 * np.pi * 1.5 * s)

@@ -31,6 +31,7 @@ EFFECTS = {
     "registration": RobotTruth(registration_deg=(1.0, -1.5, 4.0)),
     "routing_twist": RobotTruth(twist_deg=(8.0,)),
     "clearance": RobotTruth(clearance=(0.1, 0.3)),
+    "compression": RobotTruth(compression=(0.008, 0.005)),  # mm/N per segment
     "bending_friction": RobotTruth(bending_friction=(1.0, 1.5)),
 }
 

@@ -27,8 +27,8 @@ from ..model import Robot, Structure
 from ..model._equilibrium import (
     bending_memory,
     cold_state,
+    compressed_lengths,
     elastic_stiffness,
-    piece_lengths,
     solve_warm,
 )
 from ..model._robot import chain_tip
@@ -87,6 +87,7 @@ def _declared(robot: Robot) -> dict:
     phys = robot.params()
     phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
     phys["bending_friction"] = jnp.zeros_like(phys["EI"])  # none declared: an effect (bending_friction)
+    phys["axial_compliance"] = jnp.zeros_like(phys["EI"])  # none declared: an effect (compression)
     return phys
 
 
@@ -163,6 +164,7 @@ class RobotModel:
                 inputs["q"], inputs["f"], inputs["direction"], B)
             h = jnp.repeat(phys["bending_friction"], st.pieces)
             B = bending_memory(B.reshape(B.shape[0], -1), K, h, inputs["reset"]).reshape(B.shape)
-        lengths = piece_lengths(phys, st)
-        p, R = jax.vmap(lambda b: chain_tip(lengths, b))(B)
+        lengths = jax.vmap(lambda q, f, d, b: compressed_lengths(phys, st, q, f, d, b))(
+            inputs["q"], inputs["f"], inputs["direction"], B)
+        p, R = jax.vmap(chain_tip)(lengths, B)
         return {"p": p, "R": R} if state is None else {"p": p, "R": R, "state": s1}

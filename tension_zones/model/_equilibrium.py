@@ -43,6 +43,14 @@ slower (1000 FTDCR v4 samples, 4 pieces, interleaved runs: 58-62 against 52-58 u
 54-58, as before the clearance), and the solves with it were slower too (one run each: 153 against
 136 us; 26 against 24 us at constant curvature).
 
+**Compression of the backbone.** The wires' tension shortens each piece's backbone by ``a_i`` (mm/N,
+``axial_compliance`` per segment spread over its pieces) times the tension of the wires that cross it,
+and every wire's path through it with it: ``s = s0 - G tau``, ``G = X diag(a) X^T`` (``X`` (N, P) the
+pieces each wire crosses), ``tau = k max(s, 0)``. For a given bending ``s`` is the root of the
+piecewise-linear ``s + G k max(s, 0) = s0`` (:meth:`_Sample.relax`), ``V`` gains the backbone's axial
+energy ``tau^T G tau / 2``, the wires' Hessian is ``A^T W (I + G W)^-1 A`` (the taut wires in series
+with the backbone) and the tip's kinematics takes the shortened lengths (:func:`compressed_lengths`).
+
 **Friction of the bending** (hysteresis) is not part of one sample's solve: it depends on the
 bending before. :func:`bending_memory` applies it to a recording's equilibria in acquisition order,
 a play operator on each piece's bending in the metric of the elastic stiffness :func:`elastic_stiffness`
@@ -72,7 +80,7 @@ variation, which is what lets the calibration score "variable curvature" like an
 
 Physical parameters are the flat dict of :meth:`Robot.params` (``length``, ``EI`` (S,);
 ``route_angles``, ``route_radii`` (N, S); ``wire_stiffness``, ``preload`` (N,); ``friction`` (2,);
-``gravity`` (3,); ``clearance`` (2,), optional, zero if absent); the calibration's effects change
+``gravity`` (3,); ``clearance`` (2,) and ``axial_compliance`` (S,), optional, zero if absent); the calibration's effects change
 them, so the solver works on that dict and a :class:`~._robot.Structure` (the static wire counts).
 """
 
@@ -98,6 +106,9 @@ MAX_STEP = 0.5
 #: ``curvature_freedom`` regularisation: at ``r = 0`` a segment's pieces deviate from their mean bending
 #: by this fraction of the rod's variation.
 _FREEDOM_EPS = 1e-3
+#: Semismooth Newton steps for the stretch of wires that compress the backbone (:meth:`_Sample.relax`):
+#: piecewise linear, so a few reach the root (checked in the tests).
+_RELAX_ITER = 6
 #: Step sizes of the line search, tried from the largest down.
 _STEPS = 2.0 ** -np.arange(10)
 
@@ -212,6 +223,41 @@ def _load_jacobians_jvp(primals, tangents):
 _load_jacobians.defjvp(_load_jacobians_jvp, symbolic_zeros=True)
 
 
+@jax.custom_jvp
+def _relax(s0, k, G):
+    """The stretch ``s`` (N,) of wires whose tension ``k max(s, 0)`` compresses the backbone: the root
+    of ``s + G k max(s, 0) = s0`` (``s0`` the stretch of a rigid backbone, ``G`` (N, N) the
+    compliance the wires share, module notes), by semismooth Newton from ``s0``: the equations are
+    piecewise linear, so a few steps reach the root exactly (at most ``_RELAX_ITER``). Without
+    compliance ``s0`` is the root and no step is taken (a ``while_loop`` that stops at a zero
+    residual; model/README.md has what the alternatives cost). The derivative is the root's implicit one (a custom JVP: forward and
+    reverse mode, never through the iterations), ``-dG k max(s0, 0)`` at ``G = 0``, what the score
+    test needs there."""
+    tol = 1e-13 * (1.0 + jnp.max(jnp.abs(s0)))
+    eye = jnp.eye(s0.shape[0], dtype=s0.dtype)
+
+    def residual(s):
+        return s + G @ (k * jnp.maximum(s, 0.0)) - s0
+
+    def more(c):
+        return (c[1] < _RELAX_ITER) & (jnp.max(jnp.abs(residual(c[0]))) > tol)
+
+    def step(c):
+        return c[0] - jnp.linalg.solve(eye + G * (k * (c[0] > 0))[None, :], residual(c[0])), c[1] + 1
+
+    return jax.lax.while_loop(more, step, (s0, jnp.asarray(0)))[0]
+
+
+@_relax.defjvp
+def _relax_jvp(primals, tangents):
+    s0, k, G = primals
+    ds0, dk, dG = tangents
+    s = _relax(s0, k, G)
+    taut = jnp.maximum(s, 0.0)
+    rhs = ds0 - dG @ (k * taut) - G @ (dk * taut)  # d(s + G k max(s, 0)) = ds0 at fixed taut set
+    return s, jnp.linalg.solve(jnp.eye(s.shape[0], dtype=s.dtype) + G * (k * (s > 0))[None, :], rhs)
+
+
 class _Sample:
     """The pieces of ``V`` and ``F`` for one sample, gradient and generalised Hessian written out.
 
@@ -255,6 +301,11 @@ class _Sample:
         proximal = np.asarray(structure.piece_crosses, bool) & ~own
         self.C = cl[0] * jnp.asarray(own, self.A.dtype) + cl[1] * jnp.asarray(proximal, self.A.dtype)  # (N, P)
         self.has_clearance = jnp.any(cl != 0)
+        # the backbone's axial compliance (module notes): piece i shortens by a_i times the tension of
+        # the wires that cross it, and so does every wire's path through it: G = X diag(a) X^T (N, N)
+        comp = phys.get("axial_compliance", jnp.zeros(L.shape[0], self.A.dtype))
+        self.a = jnp.repeat(comp / m, m)  # (P,) mm/N per piece
+        self.G = (self.crosses * self.a[None, :]) @ self.crosses.T
 
     def _deviation(self, x):
         """``kappa * (x - segment mean)`` (2P,): the curvature-freedom penalty's gradient (0 if m = 1)."""
@@ -291,15 +342,42 @@ class _Sample:
         """The hole clearance's shortening of each wire's path, ``C |b|`` (N,), mm (0 without it)."""
         return self.C @ _guarded_norm(x.reshape(-1, 2))
 
+    def relax(self, s0):
+        """The stretch (N,) of wires whose tension compresses the backbone (:func:`_relax`)."""
+        return _relax(s0, self.k, self.G)
+
     def stretch(self, x, shortening=None):
-        """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``."""
-        return self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening)
+        """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``;
+        less the backbone's compression (:func:`_relax`)."""
+        return self.relax(self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening))
+
+    def tension_matrix(self, x, shortening=None):
+        """``d tau / d s0`` (N, N): the taut wires' stiffness in series with the backbone's compression,
+        ``W (I + G W)^-1``, ``W = diag(k [s > 0])`` (symmetric), by Woodbury over the pieces,
+        ``W - W X D (I + X^T W X D)^-1 X^T W`` with ``D = diag(a)`` (``W`` itself without compliance;
+        no square root of ``a``, whose derivative at 0 is infinite)."""
+        w = self.k * (self.stretch(x, shortening) > 0).astype(x.dtype)
+        WX = w[:, None] * self.crosses  # (N, P)
+        M = jnp.eye(WX.shape[1], dtype=w.dtype) + (self.crosses.T @ WX) * self.a[None, :]
+        return jnp.diag(w) - (WX * self.a[None, :]) @ jnp.linalg.solve(M, WX.T)
+
+    def wire_hessian(self, x, t, shortening=None):
+        """The taut wires' part of ``V``'s Hessian with the mean factors ``t`` (2P, 2P):
+        ``A^T sqrt(t) K sqrt(t) A`` with ``K`` :meth:`tension_matrix`."""
+        At = self.A * jnp.sqrt(t)[:, None]
+        return At.T @ self.tension_matrix(x, shortening) @ At
+
+    def compression(self, x):
+        """Each piece's axial shortening (P,), mm: ``a_i`` times the tension of the wires crossing it."""
+        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        return self.a * (self.crosses.T @ tau)
 
     def value(self, x, t, shortening=None):
         s = self.stretch(x, shortening)
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
         elastic = 0.5 * jnp.dot(self.E * x + self._deviation(x), x)
-        return elastic + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + load
+        tau = self.k * jnp.maximum(s, 0.0)  # the backbone's compression stores tau^T G tau / 2 (0 without)
+        return elastic + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + 0.5 * tau @ self.G @ tau + load
 
     def load_grad(self, x):
         return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
@@ -335,8 +413,7 @@ class _Sample:
         a robot that holds it) and may be indefinite; the line search and the fixed point make up for
         it at a few more iterations, each much cheaper (no differences of the load's gradient, a
         Cholesky solve instead of an eigendecomposition)."""
-        taut = (self.stretch(x, shortening) > 0).astype(x.dtype)
-        H = jnp.diag(self.E) + (self.A.T * (t * self.k * taut)) @ self.A
+        H = jnp.diag(self.E) + self.wire_hessian(x, t, shortening)
         return H if self.m == 1 else H + self.kappa[:, None] * self.D
 
     def force(self, x):
@@ -365,8 +442,7 @@ class _Sample:
         P = self.crosses.shape[1]
         T = self.piece_factors(x)
         stretch = self.stretch(x)
-        taut = (stretch > 0).astype(x.dtype)
-        rest = (self.A * (self._spread(T) - t[:, None])).T @ ((self.k * taut)[:, None] * self.A)
+        rest = (self.A * self._spread(T)).T @ self.tension_matrix(x) @ self.A - self.wire_hessian(x, t)
         B = x.reshape(-1, 2)
         nb = _guarded_norm(B)
         unit = B / jnp.where(nb > 0, nb, 1.0)[:, None]  # d|b|/db, 0 at b = 0
@@ -381,9 +457,8 @@ class _Sample:
         B = x.reshape(-1, 2)
         nb = _guarded_norm(B)
         unit = (B / jnp.where(nb > 0, nb, 1.0)[:, None]).reshape(-1)  # d|b|/db, 0 at b = 0
-        taut = (self.stretch(x) > 0).astype(x.dtype)
         arms = self.A * self._spread(self.piece_factors(x))
-        return -arms.T @ ((self.k * taut)[:, None] * (self._spread(self.C) * unit[None, :]))
+        return -arms.T @ (self.tension_matrix(x) @ (self._spread(self.C) * unit[None, :]))
 
     def coupling_matrix(self, x, t):
         """The non-symmetric part of ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t``:
@@ -550,6 +625,17 @@ def piece_lengths(phys, structure: Structure):
     return phys["length"] if m == 1 else jnp.repeat(phys["length"] / m, m)
 
 
+def compressed_lengths(phys, structure: Structure, q, f, direction, B):
+    """``(P,)`` the pieces' lengths (mm) at the bending ``B`` (P, 2) of one sample, each shortened by
+    the backbone's compression under the tension of the wires that cross it (``axial_compliance``;
+    :func:`piece_lengths` without it). Arguments as in :func:`solve`."""
+    dt = jnp.result_type(phys["length"], q, float)
+    q, f = jnp.asarray(q, dt), jnp.asarray(f, dt)
+    direction = jnp.zeros_like(q) if direction is None else jnp.asarray(direction, dt)
+    sm = _Sample(phys, structure, q, f, direction, jnp.zeros((), bool))
+    return piece_lengths(phys, structure) - sm.compression(jnp.asarray(B, dt).reshape(-1))
+
+
 def segment_bending(B, structure: Structure):
     """``(S, 2)`` each segment's total bending vector from the pieces' ``B`` (P, 2) (their sum: exact
     for constant curvature, the mean curvature times the length for the rod)."""
@@ -639,7 +725,8 @@ def forward(robot: Robot, q, load: Load | None = None, pieces: int = 1):
     ``pieces > 1``: the rod model (see :func:`equilibrium`)."""
     st = _structure(robot, pieces)
     phys, f = _phys(robot, load)
-    return chain_tip(piece_lengths(phys, st), solve(phys, st, q, f))
+    B = solve(phys, st, q, f)
+    return chain_tip(compressed_lengths(phys, st, q, f, None, B), B)
 
 
 def wire_stretch(robot: Robot, B, q):

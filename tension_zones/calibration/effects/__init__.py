@@ -9,6 +9,7 @@ from .backbone import BackboneEI
 from .backlash import Backlash, play
 from .bending_friction import BendingFriction
 from .clearance import Clearance
+from .compression import Compression
 from .drift import Drift
 from .friction import Friction
 from .geometry import Geometry
@@ -26,7 +27,7 @@ from .wire_stiffness import WireStiffness
 
 #: Every effect, in the order reports list them.
 ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
-       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Drift(),
+       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Compression(), Drift(),
        BendingFriction(), Marker(), Geometry())
 #: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
 #: in an unregistered tracker frame, whose origin is never known, nor which way each segment's wires
@@ -56,6 +57,6 @@ def nominal(frame: str = "base") -> tuple[Effect, ...]:
     return tuple(BY_NAME[n] for n in NOMINAL[frame])
 
 
-__all__ = ["ALL", "BY_NAME", "NOMINAL", "OPT_IN", "BackboneEI", "Backlash", "BendingFriction", "Clearance", "Drift", "Effect", "Friction", "Geometry", "Gravity",
+__all__ = ["ALL", "BY_NAME", "NOMINAL", "OPT_IN", "BackboneEI", "Backlash", "BendingFriction", "Clearance", "Compression", "Drift", "Effect", "Friction", "Geometry", "Gravity",
            "Marker", "Offset", "PatternRotation", "Preload", "Registration", "RoutingTwist", "TipForce", "VariableCurvature", "WireAngleOffset", "WireStiffness",
            "library", "nominal", "play"]
