@@ -161,3 +161,35 @@ def test_new_compliances_do_not_recompile():
     for a in (np.zeros(3), np.full(3, 2e-3), np.array([0.0, 5e-3, 1e-3])):
         f(jnp.asarray(a)).block_until_ready()
     assert len(traces) == 1
+
+
+def test_with_friction_and_clearance_the_solve_is_the_root_of_the_force_and_differentiable():
+    """Friction makes the force no gradient: within a Newton step the wires stand in ``V`` at their
+    mean factors (stiffness ``t k``, the compression solved with them too) and the rest of the force
+    is frozen; the line search must still find descent, and the solve end at ``F = 0``."""
+    rob = robot()
+    rng = np.random.default_rng(6)
+    q0 = commands(rob, rng)
+    direction = jnp.asarray(rng.choice([-1.0, 1.0], rob.n_wires))
+    phys = phys_of(rob, [4e-3, 3e-3, 2e-3])
+    phys["friction"] = jnp.asarray([0.1, 0.3])
+    phys["clearance"] = jnp.asarray([0.1, 0.2])
+
+    @jax.jit
+    def tip_f(compliance, q):
+        ph = dict(phys, axial_compliance=compliance)
+        B = eq.solve(ph, rob.structure, q, jnp.zeros(3), direction)
+        return chain_tip(eq.compressed_lengths(ph, rob.structure, q, jnp.zeros(3), direction, B), B)[0], B
+
+    a0 = phys["axial_compliance"]
+    _, B = tip_f(a0, q0)
+    sm = eq._Sample(phys, rob.structure, q0, jnp.zeros(3), direction, jnp.asarray(False))
+    assert float(jnp.max(jnp.abs(sm.force(B.reshape(-1))))) < 1e-9
+    J = np.asarray(jax.jacfwd(lambda a: tip_f(a, q0)[0])(a0))
+    fd = np.stack([(tip_f(a0.at[i].add(1e-7), q0)[0] - tip_f(a0.at[i].add(-1e-7), q0)[0]) / 2e-7
+                   for i in range(3)], axis=1)
+    np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-5)
+    J = np.asarray(jax.jacfwd(lambda q: tip_f(a0, q)[0])(q0))
+    fd = np.stack([(tip_f(a0, q0.at[i].add(1e-6))[0] - tip_f(a0, q0.at[i].add(-1e-6))[0]) / 2e-6
+                   for i in range(rob.n_wires)], axis=1)
+    np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)

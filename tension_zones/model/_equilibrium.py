@@ -334,9 +334,13 @@ class _Sample:
         return jnp.repeat(T, 2, axis=1)
 
     def friction_rest(self, x, t):
-        """The friction force beyond the mean factors ``t``: ``sum_k tau_k (T_k - t_k) a_k`` (2P,)."""
+        """The friction force beyond the mean factors ``t`` (2P,): the wires' part of ``F``, ``sum_k
+        tau_k T_k a_k``, less the gradient of ``V`` with the mean factors (:meth:`grad`; ``sum_k tau_k
+        (T_k - t_k) a_k`` for a rigid backbone)."""
         tau = self.k * jnp.maximum(self.stretch(x), 0.0)
-        return (self.A * (self._spread(self.piece_factors(x)) - t[:, None])).T @ tau
+        kt = t * self.k
+        tau_t = kt * jnp.maximum(self.stretch(x, k=kt), 0.0)
+        return (self.A * self._spread(self.piece_factors(x))).T @ tau - self.A.T @ tau_t
 
     def shortening(self, x):
         """The hole clearance's shortening of each wire's path, ``C |b|`` (N,), mm (0 without it)."""
@@ -346,26 +350,28 @@ class _Sample:
         """The stretch (N,) of wires whose tension compresses the backbone (:func:`_relax`)."""
         return _relax(s0, self.k, self.G)
 
-    def stretch(self, x, shortening=None):
+    def stretch(self, x, shortening=None, k=None):
         """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``;
-        less the backbone's compression (:func:`_relax`)."""
-        return self.relax(self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening))
+        less the backbone's compression (:func:`_relax`) under wires of stiffness ``k`` (default the
+        wires'; a Newton step's ``V`` has them at their mean friction factors, ``t k``)."""
+        s0 = self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening)
+        return _relax(s0, self.k if k is None else k, self.G)
 
-    def tension_matrix(self, x, shortening=None):
+    def tension_matrix(self, x, shortening=None, k=None):
         """``d tau / d s0`` (N, N): the taut wires' stiffness in series with the backbone's compression,
         ``W (I + G W)^-1``, ``W = diag(k [s > 0])`` (symmetric), by Woodbury over the pieces,
         ``W - W X D (I + X^T W X D)^-1 X^T W`` with ``D = diag(a)`` (``W`` itself without compliance;
         no square root of ``a``, whose derivative at 0 is infinite)."""
-        w = self.k * (self.stretch(x, shortening) > 0).astype(x.dtype)
+        k = self.k if k is None else k
+        w = k * (self.stretch(x, shortening, k) > 0).astype(x.dtype)
         WX = w[:, None] * self.crosses  # (N, P)
         M = jnp.eye(WX.shape[1], dtype=w.dtype) + (self.crosses.T @ WX) * self.a[None, :]
         return jnp.diag(w) - (WX * self.a[None, :]) @ jnp.linalg.solve(M, WX.T)
 
     def wire_hessian(self, x, t, shortening=None):
-        """The taut wires' part of ``V``'s Hessian with the mean factors ``t`` (2P, 2P):
-        ``A^T sqrt(t) K sqrt(t) A`` with ``K`` :meth:`tension_matrix`."""
-        At = self.A * jnp.sqrt(t)[:, None]
-        return At.T @ self.tension_matrix(x, shortening) @ At
+        """The taut wires' part of ``V``'s Hessian with the mean factors ``t`` (2P, 2P): ``A^T K A``
+        with ``K`` :meth:`tension_matrix` for wires of stiffness ``t k``."""
+        return self.A.T @ self.tension_matrix(x, shortening, t * self.k) @ self.A
 
     def compression(self, x):
         """Each piece's axial shortening (P,), mm: ``a_i`` times the tension of the wires crossing it."""
@@ -373,17 +379,21 @@ class _Sample:
         return self.a * (self.crosses.T @ tau)
 
     def value(self, x, t, shortening=None):
-        s = self.stretch(x, shortening)
+        """``V`` with the wires at their mean friction factors ``t`` (stiffness ``t k``), ``shortening``
+        frozen; its gradient is :meth:`grad` (the backbone's compression eliminated at its minimum)."""
+        kt = t * self.k
+        s = self.stretch(x, shortening, kt)
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
         elastic = 0.5 * jnp.dot(self.E * x + self._deviation(x), x)
-        tau = self.k * jnp.maximum(s, 0.0)  # the backbone's compression stores tau^T G tau / 2 (0 without)
-        return elastic + 0.5 * jnp.sum(t * self.k * jnp.maximum(s, 0.0) ** 2) + 0.5 * tau @ self.G @ tau + load
+        tau = kt * jnp.maximum(s, 0.0)  # the backbone's compression stores tau^T G tau / 2 (0 without)
+        return elastic + 0.5 * jnp.sum(kt * jnp.maximum(s, 0.0) ** 2) + 0.5 * tau @ self.G @ tau + load
 
     def load_grad(self, x):
         return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
 
     def grad(self, x, t, load_grad=None, shortening=None):
-        tau = t * self.k * jnp.maximum(self.stretch(x, shortening), 0.0)
+        kt = t * self.k
+        tau = kt * jnp.maximum(self.stretch(x, shortening, kt), 0.0)
         load = self.load_grad(x) if load_grad is None else load_grad
         return self.E * x + self._deviation(x) + self.A.T @ tau + load
 
