@@ -266,11 +266,13 @@ def test_a_drift_of_the_wires_is_named_and_fitted(tmp_path):
     assert rep["model"]["clock"][0] == 100.0  # the training file's first timestamp
 
 
-@pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction")])
+@pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction"),
+                                  ("compression", "clearance"), ("compression", "preload")])
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
     """Two effects at once. Geometry with a tracker tilt: the loop named a marker offset instead (4.3x
     the noise floor) until it took a second look where no score was significant. The hole clearance
-    with friction: both make the distal segments bend less the more the proximal ones bend."""
+    with friction, and the backbone's compression with it: all make the distal segments bend less the
+    more the proximal ones bend. The compression with a preload: both change the wires' tension."""
     a, b = pair
     nominal = RobotTruth()
     own_b = {f.name: getattr(EFFECTS[b], f.name) for f in dataclasses.fields(nominal)
