@@ -291,10 +291,11 @@ class _Robot:
         for k in range(self.N):
             self.X[k, :self.crossed[k]] = 1.0
 
-    def compression(self, s0):
+    def compression(self, s0, k=None):
         """The pieces' shortening ``e`` (S,) for the rigid backbone's stretch ``s0``: the minimum over
         ``e`` of ``sum_k k_k max(s0 - X e, 0)^2 / 2 + sum_j e_j^2 / (2 a_j)``, by active sets in ``e``
-        (the set of taut wires, iterated until it stays)."""
+        (the set of taut wires, iterated until it stays); ``k`` the wires' stiffness (default their own)."""
+        k = self.k if k is None else k
         live = self.a > 0
         e = np.zeros(self.S)
         if not live.any():
@@ -302,7 +303,7 @@ class _Robot:
         taut = s0 > 0
         for _ in range(50):
             Xl = self.X[:, live]
-            W = self.k * taut
+            W = k * taut
             M = np.diag(1.0 / self.a[live]) + Xl.T @ (W[:, None] * Xl)
             e[live] = np.linalg.solve(M, Xl.T @ (W * s0))
             new = s0 - self.X @ e > 0
@@ -311,13 +312,14 @@ class _Robot:
             taut = new
         return e
 
-    def stretch(self, x, q, short=None):
+    def stretch(self, x, q, short=None, k=None):
         """Each wire's stretch (N,): the routing's length change, less the clearance's shortening
-        (``short``, frozen, or else at ``x``)."""
+        (``short``, frozen, or else at ``x``) and the backbone's compression under wires of stiffness
+        ``k`` (default their own)."""
         if short is None:
             short = self.C @ np.hypot(*x.reshape(self.S, 2).T)
         s0 = self.A @ x - q + self.pre / self.k - short
-        return s0 - self.X @ self.compression(s0)
+        return s0 - self.X @ self.compression(s0, k)
 
     def chain(self, B, lengths=None):
         """Disk poses along the chain (lists of S + 1) and the weight's quadrature points; ``lengths``
@@ -363,15 +365,16 @@ class _Robot:
         return -(p @ self.f) - (M @ self.g)
 
     def energy(self, x, q, t, short=0.0):
-        """``V`` and its gradient with the clearance's shortening ``short`` frozen (the wires' moment
-        arms are the routing's ``A`` either way)."""
-        s = self.stretch(x, q, short)
+        """``V`` and its gradient with the clearance's shortening ``short`` frozen and the wires at
+        stiffness ``t k`` (in the backbone's compression too; the wires' moment arms are the routing's
+        ``A`` either way)."""
+        kt = t * self.k
+        s = self.stretch(x, q, short, kt)
         E = np.repeat(self.EI / self.L, 2)
-        tau = self.k * np.maximum(s, 0.0)
+        tau = kt * np.maximum(s, 0.0)
         e = self.a * (self.X.T @ tau)  # the backbone's shortening stores e^2 / (2 a)
-        V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(t * self.k * np.maximum(s, 0.0) ** 2) \
-            + 0.5 * np.sum(e * (self.X.T @ tau))
-        g = E * x + self.A.T @ (t * self.k * np.maximum(s, 0.0))
+        V = 0.5 * np.sum(E * x * x) + 0.5 * np.sum(kt * np.maximum(s, 0.0) ** 2) + 0.5 * np.sum(e * (self.X.T @ tau))
+        g = E * x + self.A.T @ tau
         if self.loaded:
             h, n = 1e-6, len(x)
             vals = self.load(np.concatenate([x[None], x + h * np.eye(n), x - h * np.eye(n)]))
@@ -433,8 +436,9 @@ class _Robot:
                     return sol.x
             T = self.factors(x, direction)
             t = np.array([T[k, :self.crossed[k]].mean() for k in range(self.N)])
-            tau = self.k * np.maximum(self.stretch(x, q), 0.0)
-            rest = (self.A * np.repeat(T - t[:, None], 2, axis=1)).T @ tau
+            # the rest of the force beyond that energy's gradient, frozen (sum_k tau_k (T_k - t_k) a_k
+            # for a rigid backbone)
+            rest = self.force(x, q, direction) - self.energy(x, q, t, self.C @ np.hypot(*x.reshape(self.S, 2).T))[1]
             if np.max(np.abs(self.force(x, q, direction))) < 1e-7:
                 break
         return x

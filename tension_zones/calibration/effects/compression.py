@@ -32,7 +32,7 @@ class Compression(Effect):
 
     def bounds(self, model, phys0):
         # from none at all (a rigid backbone) to the wires' own compliance; the parameter is the
-        # change from the declared compliance (a design's backbone_EA)
+        # change from the declared compliance (none today: RobotModel declares 0)
         declared = np.asarray(phys0["axial_compliance"], float) / _UM
         return -declared, np.full(declared.shape[0], 1.0 / _UM / float(np.min(phys0["wire_stiffness"]))) - declared
 
