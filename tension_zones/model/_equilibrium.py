@@ -333,13 +333,14 @@ class _Sample:
         """Per-piece factors (N, P) as the routing matrix's columns (N, 2P)."""
         return jnp.repeat(T, 2, axis=1)
 
-    def friction_rest(self, x, t):
+    def friction_rest(self, x, t, s=None, s_t=None):
         """The friction force beyond the mean factors ``t`` (2P,): the wires' part of ``F``, ``sum_k
         tau_k T_k a_k``, less the gradient of ``V`` with the mean factors (:meth:`grad`; ``sum_k tau_k
-        (T_k - t_k) a_k`` for a rigid backbone)."""
-        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        (T_k - t_k) a_k`` for a rigid backbone). ``s``, ``s_t``: the stretch at ``x`` under wires of
+        stiffness ``k`` and ``t k`` where the caller has them (:meth:`stretch`)."""
         kt = t * self.k
-        tau_t = kt * jnp.maximum(self.stretch(x, k=kt), 0.0)
+        tau = self.k * jnp.maximum(self.stretch(x) if s is None else s, 0.0)
+        tau_t = kt * jnp.maximum(self.stretch(x, k=kt) if s_t is None else s_t, 0.0)
         return (self.A * self._spread(self.piece_factors(x))).T @ tau - self.A.T @ tau_t
 
     def shortening(self, x):
@@ -353,36 +354,39 @@ class _Sample:
     def stretch(self, x, shortening=None, k=None):
         """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``;
         less the backbone's compression (:func:`_relax`) under wires of stiffness ``k`` (default the
-        wires'; a Newton step's ``V`` has them at their mean friction factors, ``t k``)."""
+        wires'; a Newton step's ``V`` has them at their mean friction factors, ``t k``). Each call is
+        a solve (a ``while_loop``): the methods below take it as ``s`` where the caller has it, so a
+        Newton iteration solves it once per stiffness, not once per use (smaller programs)."""
         s0 = self.A @ x + self.c - (self.shortening(x) if shortening is None else shortening)
         return _relax(s0, self.k if k is None else k, self.G)
 
-    def tension_matrix(self, x, shortening=None, k=None):
+    def tension_matrix(self, x, shortening=None, k=None, s=None):
         """``d tau / d s0`` (N, N): the taut wires' stiffness in series with the backbone's compression,
         ``W (I + G W)^-1``, ``W = diag(k [s > 0])`` (symmetric), by Woodbury over the pieces,
         ``W - W X D (I + X^T W X D)^-1 X^T W`` with ``D = diag(a)`` (``W`` itself without compliance;
         no square root of ``a``, whose derivative at 0 is infinite)."""
         k = self.k if k is None else k
-        w = k * (self.stretch(x, shortening, k) > 0).astype(x.dtype)
+        s = self.stretch(x, shortening, k) if s is None else s
+        w = k * (s > 0).astype(x.dtype)
         WX = w[:, None] * self.crosses  # (N, P)
         M = jnp.eye(WX.shape[1], dtype=w.dtype) + (self.crosses.T @ WX) * self.a[None, :]
         return jnp.diag(w) - (WX * self.a[None, :]) @ jnp.linalg.solve(M, WX.T)
 
-    def wire_hessian(self, x, t, shortening=None):
+    def wire_hessian(self, x, t, shortening=None, s=None):
         """The taut wires' part of ``V``'s Hessian with the mean factors ``t`` (2P, 2P): ``A^T K A``
-        with ``K`` :meth:`tension_matrix` for wires of stiffness ``t k``."""
-        return self.A.T @ self.tension_matrix(x, shortening, t * self.k) @ self.A
+        with ``K`` :meth:`tension_matrix` for wires of stiffness ``t k`` (``s``: their stretch)."""
+        return self.A.T @ self.tension_matrix(x, shortening, t * self.k, s) @ self.A
 
     def compression(self, x):
         """Each piece's axial shortening (P,), mm: ``a_i`` times the tension of the wires crossing it."""
         tau = self.k * jnp.maximum(self.stretch(x), 0.0)
         return self.a * (self.crosses.T @ tau)
 
-    def value(self, x, t, shortening=None):
+    def value(self, x, t, shortening=None, s=None):
         """``V`` with the wires at their mean friction factors ``t`` (stiffness ``t k``), ``shortening``
         frozen; its gradient is :meth:`grad` (the backbone's compression eliminated at its minimum)."""
         kt = t * self.k
-        s = self.stretch(x, shortening, kt)
+        s = self.stretch(x, shortening, kt) if s is None else s
         load = self._if_loaded(lambda y: load_potential(self.lengths, y, self.f, self.g), x, jnp.zeros((), x.dtype))
         elastic = 0.5 * jnp.dot(self.E * x + self._deviation(x), x)
         tau = kt * jnp.maximum(s, 0.0)  # the backbone's compression stores tau^T G tau / 2 (0 without)
@@ -391,9 +395,9 @@ class _Sample:
     def load_grad(self, x):
         return self._if_loaded(lambda y: load_gradient(self.lengths, y, self.f, self.g), x, jnp.zeros_like(x))
 
-    def grad(self, x, t, load_grad=None, shortening=None):
+    def grad(self, x, t, load_grad=None, shortening=None, s=None):
         kt = t * self.k
-        tau = kt * jnp.maximum(self.stretch(x, shortening, kt), 0.0)
+        tau = kt * jnp.maximum(self.stretch(x, shortening, kt) if s is None else s, 0.0)
         load = self.load_grad(x) if load_grad is None else load_grad
         return self.E * x + self._deviation(x) + self.A.T @ tau + load
 
@@ -412,18 +416,18 @@ class _Sample:
 
         return self._if_loaded(fd, x, jnp.zeros((x.shape[0],) * 2, x.dtype))
 
-    def hess(self, x, t):
+    def hess(self, x, t, s_t=None):
         """Generalised Hessian of ``V`` with ``t`` frozen: exact for the backbone and the wires,
         :meth:`_load_hessian` for the load (the exact implicit derivative uses it)."""
-        return self.newton_matrix(x, t) + self._load_hessian(x)
+        return self.newton_matrix(x, t, s=s_t) + self._load_hessian(x)
 
-    def newton_matrix(self, x, t, shortening=None):
+    def newton_matrix(self, x, t, shortening=None, s=None):
         """The Newton step's matrix: the backbone's and the taut wires' Hessian, positive definite.
         The load's curvature is left out: it is small against the wires' (a tip force or a weight on
         a robot that holds it) and may be indefinite; the line search and the fixed point make up for
         it at a few more iterations, each much cheaper (no differences of the load's gradient, a
         Cholesky solve instead of an eigendecomposition)."""
-        H = jnp.diag(self.E) + self.wire_hessian(x, t, shortening)
+        H = jnp.diag(self.E) + self.wire_hessian(x, t, shortening, s)
         return H if self.m == 1 else H + self.kappa[:, None] * self.D
 
     def force(self, x):
@@ -444,15 +448,17 @@ class _Sample:
 
         return self.E * x + self._deviation(x) + wires + jax.lax.cond(self.loaded, loaded, unloaded, x)
 
-    def friction_matrix(self, x, t):
+    def friction_matrix(self, x, t, s=None, s_t=None):
         """What friction adds to ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t`` (2P, 2P),
         zero without friction: the rest of the factors times the taut wires' stiffness, and the
         factors' own change with the bending, ``dT_ki/db_l = T_ki d_k mu_1 dw_ki/db_l`` with
-        ``dw_ki/db_l = b_l / |b_l|`` for a crossed piece ``l < i`` and half that for ``l = i``."""
+        ``dw_ki/db_l = b_l / |b_l|`` for a crossed piece ``l < i`` and half that for ``l = i``
+        (``s``, ``s_t`` as in :meth:`friction_rest`)."""
         P = self.crosses.shape[1]
         T = self.piece_factors(x)
-        stretch = self.stretch(x)
-        rest = (self.A * self._spread(T)).T @ self.tension_matrix(x) @ self.A - self.wire_hessian(x, t)
+        stretch = self.stretch(x) if s is None else s
+        rest = ((self.A * self._spread(T)).T @ self.tension_matrix(x, s=stretch) @ self.A
+                - self.wire_hessian(x, t, s=s_t))
         B = x.reshape(-1, 2)
         nb = _guarded_norm(B)
         unit = B / jnp.where(nb > 0, nb, 1.0)[:, None]  # d|b|/db, 0 at b = 0
@@ -460,7 +466,7 @@ class _Sample:
         turn = jnp.einsum("kp,kpi,kpl,lj->pilj", coef, self.A.reshape(-1, P, 2), self.wraps, unit)
         return rest + turn.reshape(2 * P, 2 * P)
 
-    def clearance_matrix(self, x):
+    def clearance_matrix(self, x, s=None):
         """What the hole clearance adds to ``dF/dx`` (2P, 2P), zero without it: each taut wire's moment
         arms (times its friction factors) times the change of its shortening ``C_k |b|``,
         ``-sum_k k_k (T_k * a_k) (C_ki b_i / |b_i|)^T`` (0 at ``b_i = 0``)."""
@@ -468,20 +474,22 @@ class _Sample:
         nb = _guarded_norm(B)
         unit = (B / jnp.where(nb > 0, nb, 1.0)[:, None]).reshape(-1)  # d|b|/db, 0 at b = 0
         arms = self.A * self._spread(self.piece_factors(x))
-        return -arms.T @ (self.tension_matrix(x) @ (self._spread(self.C) * unit[None, :]))
+        return -arms.T @ (self.tension_matrix(x, s=s) @ (self._spread(self.C) * unit[None, :]))
 
-    def coupling_matrix(self, x, t):
+    def coupling_matrix(self, x, t, s=None, s_t=None):
         """The non-symmetric part of ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t``:
         :meth:`friction_matrix` plus :meth:`clearance_matrix`."""
-        return self.friction_matrix(x, t) + self.clearance_matrix(x)
+        s = self.stretch(x) if s is None else s
+        return self.friction_matrix(x, t, s, s_t) + self.clearance_matrix(x, s)
 
     def force_jacobian(self, x):
         """``dF/dx`` (2P, 2P): :meth:`hess` with the mean factors plus :meth:`coupling_matrix` (a
         run-time branch, skipped where friction and clearance are zero)."""
         t = self.factor(x)
+        s_t = self.stretch(x, k=t * self.k)
         zero = jnp.zeros((x.shape[0],) * 2, x.dtype)
-        return self.hess(x, t) + jax.lax.cond(self.has_friction | self.has_clearance, self.coupling_matrix,
-                                              lambda *_: zero, x, t)
+        coupling = self.has_friction | self.has_clearance
+        return self.hess(x, t, s_t) + jax.lax.cond(coupling, self.coupling_matrix, lambda *_: zero, x, t, None, s_t)
 
 
 def _newton(sm: _Sample, x0, HL0):
@@ -501,13 +509,14 @@ def _newton(sm: _Sample, x0, HL0):
     def solve(H, g):
         return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
-    def with_friction(x, t, H, g0):
+    def with_friction(x, t, s_t, H, g0):
         # the rest of the friction force, frozen at the iterate (a constant force in V, module notes),
         # and the step to the root of F: friction's part of dF/dx is not symmetric (an LU solve)
-        rest = sm.friction_rest(x, t)
-        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t), g0 + rest)
+        s = sm.stretch(x)
+        rest = sm.friction_rest(x, t, s, s_t)
+        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t, s, s_t), g0 + rest)
 
-    def without(x, t, H, g0):  # V's own Newton step (symmetric: Cholesky)
+    def without(x, t, s_t, H, g0):  # V's own Newton step (symmetric: Cholesky)
         return jnp.zeros_like(g0), solve(H, g0)
 
     def search(x, d, t, rest, g, v0, short):
@@ -534,15 +543,16 @@ def _newton(sm: _Sample, x0, HL0):
         # the clearance's shortening, frozen within the step; a run-time branch: the iterations carry no
         # derivative (the implicit one is taken from F at the root), so zero clearance skips it
         short = jax.lax.cond(sm.has_clearance, sm.shortening, lambda y: jnp.zeros_like(sm.c), x)
-        g0, H = sm.grad(x, t, gl, short), sm.newton_matrix(x, t, short)
+        s_t = sm.stretch(x, short, t * sm.k)  # once, for V's value, gradient and matrix at x
+        g0, H = sm.grad(x, t, gl, short, s_t), sm.newton_matrix(x, t, short, s_t)
         # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
         # it stays a branch there, and a robot without friction skips its terms and the LU solve
-        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, H + HL, g0)
+        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, s_t, H + HL, g0)
         g = g0 + rest
         d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
-        step = search(x, d, t, rest, g, sm.value(x, t, short), short)
+        step = search(x, d, t, rest, g, sm.value(x, t, short, s_t), short)
         x_new = x + step
         # SR1 update of the load's curvature from the change of its gradient along the step
         gl_new = sm.load_grad(x_new)
