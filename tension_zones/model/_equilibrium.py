@@ -93,8 +93,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._kinematics import segment_J_xb, segment_weight_moment, segment_weight_moment_jacobian
 from .._numerics import skew
+from ._kinematics import segment_J_xb, segment_weight_moment, segment_weight_moment_jacobian
 from ._robot import Robot, Structure, chain_poses, chain_tip, routing_matrix
 
 #: Newton iterations at most (a piecewise-quadratic problem converges in a handful; set changes and
@@ -571,7 +571,7 @@ def _newton(sm: _Sample, x0, HL0):
     return x, HL
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _solver(structure: Structure):
     """The implicitly differentiated solve for one robot structure (static)."""
 
