@@ -524,18 +524,36 @@ def _newton(sm: _Sample, x0, HL0):
         # so converged steps are not rejected by noise in V), tried from the largest down; under a
         # vmap over samples it runs until every sample has its step, which near the equilibrium is
         # the first (with the load's gradient computed once per step, a cold FTDCR v4 solve of 1216
-        # loaded samples took 0.103 s instead of 0.175 s with all ten evaluated at once)
+        # loaded samples took 0.103 s instead of 0.175 s with all ten evaluated at once).
+        # With friction V (its rest frozen) is a model of the step's start only, and its full steps
+        # can cycle: with the backbone's compression a wire pulled alone alternated between two
+        # taut sets at |F| 168 (tests/test_compression.py). There the step must also lower |F|^2
+        # (Armijo's on the force, which g is at x: the Newton direction on F descends it); the
+        # largest step V accepts is the fallback where none does (round-off near the root).
+        n = steps.shape[0]
+        gg = jnp.dot(g, g)
+
+        def force_ok(y, s):
+            F = sm.force(y)
+            return jnp.dot(F, F) <= (1.0 - 1e-4 * s) * gg
+
         def more(c):
-            return (c[0] < steps.shape[0]) & ~c[1]
+            return (c[0] < n) & ~c[2]
 
         def next_step(c):
-            s = steps[c[0]]
-            ok = (sm.value(x + s * d, t, short) + s * jnp.dot(rest, d)
-                  <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
-            return jnp.where(ok, c[0], c[0] + 1), ok
+            j, jv, _ = c
+            s = steps[j]
+            y = x + s * d
+            ok_v = (sm.value(y, t, short) + s * jnp.dot(rest, d)
+                    <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
+            jv = jnp.where((jv == n) & ok_v, j, jv)
+            ok_f = jax.lax.cond(sm.has_friction, force_ok, lambda *_: jnp.asarray(False), y, s)
+            found = jnp.where(sm.has_friction, ok_f, ok_v)
+            return jnp.where(found, j, j + 1), jv, found
 
-        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
-        return jnp.where(found, steps[jnp.minimum(j, steps.shape[0] - 1)], 0.0) * d
+        j, jv, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(n), jnp.asarray(False)))
+        j = jnp.where(found, j, jv)  # V's step where no step lowers |F| (none at all: 0)
+        return jnp.where(j < n, steps[jnp.minimum(j, n - 1)], 0.0) * d
 
     def body(state):
         x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
