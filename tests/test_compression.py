@@ -203,6 +203,7 @@ def test_a_wire_pulled_alone_with_friction_and_compression_reaches_the_generator
     ended there, cold. Now every cold solve of the generator's training commands is the root of the
     force and the generator's own equilibrium (``tests/simulator.py``, MINPACK and BFGS)."""
     import simulator as sim
+
     from tension_zones.model._robot import Structure
 
     truth = sim.RobotTruth(compression=compliance, friction=friction)
