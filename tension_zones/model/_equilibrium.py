@@ -61,7 +61,9 @@ which also keeps the derivatives cheap).
 wires' Hessian exact, the load's curvature learnt along the way (see :func:`_newton`), and a
 backtracking line search over ten step sizes, the largest that satisfies Armijo's condition taken.
 ``max(s, 0)^2`` is only C1, so Newton is exact within a set of taut wires and the line search
-handles set changes. The derivatives come from the implicit function theorem on ``F(x*) = 0``
+handles set changes; with friction, from the 8th iteration on, a step must lower ``|F|`` too (V's
+full steps can cycle between taut sets, model/README.md). The derivatives come from the implicit
+function theorem on ``F(x*) = 0``
 (a custom JVP), never from the iterations. Per sample; ``vmap`` it.
 
 **The rod model** (``Structure.pieces = m > 1``). Each segment's backbone is solved as ``m`` pieces of
@@ -111,6 +113,10 @@ _FREEDOM_EPS = 1e-3
 _RELAX_ITER = 6
 #: Step sizes of the line search, tried from the largest down.
 _STEPS = 2.0 ** -np.arange(10)
+
+#: With friction, the iteration from which a step must lower ``|F|`` (``_newton``): V's steps end
+#: almost every solve before it, and its full steps can cycle between taut sets
+_FORCE_SEARCH = 8
 
 
 @dataclasses.dataclass(frozen=True)
@@ -448,6 +454,13 @@ class _Sample:
 
         return self.E * x + self._deviation(x) + wires + jax.lax.cond(self.loaded, loaded, unloaded, x)
 
+    def force_value(self, x, load_grad):
+        """``F(x)`` (2P,) given the load's gradient there (:meth:`load_grad`): its value alone, for the
+        Newton step's safeguard (:meth:`force` is the one differentiated)."""
+        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        return self.E * x + self._deviation(x) + (self.A * self._spread(self.piece_factors(x))).T @ tau + load_grad
+
+
     def friction_matrix(self, x, t, s=None, s_t=None):
         """What friction adds to ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t`` (2P, 2P),
         zero without friction: the rest of the factors times the taut wires' stiffness, and the
@@ -524,36 +537,43 @@ def _newton(sm: _Sample, x0, HL0):
         # so converged steps are not rejected by noise in V), tried from the largest down; under a
         # vmap over samples it runs until every sample has its step, which near the equilibrium is
         # the first (with the load's gradient computed once per step, a cold FTDCR v4 solve of 1216
-        # loaded samples took 0.103 s instead of 0.175 s with all ten evaluated at once).
-        # With friction V (its rest frozen) is a model of the step's start only, and its full steps
-        # can cycle: with the backbone's compression a wire pulled alone alternated between two
-        # taut sets at |F| 168 (tests/test_compression.py). There the step must also lower |F|^2
-        # (Armijo's on the force, which g is at x: the Newton direction on F descends it); the
-        # largest step V accepts is the fallback where none does (round-off near the root).
-        n = steps.shape[0]
-        gg = jnp.dot(g, g)
-
-        def force_ok(y, s):
-            F = sm.force(y)
-            return jnp.dot(F, F) <= (1.0 - 1e-4 * s) * gg
-
+        # loaded samples took 0.103 s instead of 0.175 s with all ten evaluated at once)
         def more(c):
-            return (c[0] < n) & ~c[2]
+            return (c[0] < steps.shape[0]) & ~c[1]
 
         def next_step(c):
-            j, jv, _ = c
-            s = steps[j]
-            y = x + s * d
-            ok_v = (sm.value(y, t, short) + s * jnp.dot(rest, d)
-                    <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
-            jv = jnp.where((jv == n) & ok_v, j, jv)
-            ok_f = jax.lax.cond(sm.has_friction, force_ok, lambda *_: jnp.asarray(False), y, s)
-            found = jnp.where(sm.has_friction, ok_f, ok_v)
-            return jnp.where(found, j, j + 1), jv, found
+            s = steps[c[0]]
+            ok = (sm.value(x + s * d, t, short) + s * jnp.dot(rest, d)
+                  <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
+            return jnp.where(ok, c[0], c[0] + 1), ok
 
-        j, jv, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(n), jnp.asarray(False)))
-        j = jnp.where(found, j, jv)  # V's step where no step lowers |F| (none at all: 0)
-        return jnp.where(j < n, steps[jnp.minimum(j, n - 1)], 0.0) * d
+        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
+        return jnp.where(found, steps[jnp.minimum(j, steps.shape[0] - 1)], 0.0) * d
+
+    def force_search(x, d, g, step, it):
+        # Friction's safeguard. V (its rest frozen) describes the step's start only, and its full steps
+        # can cycle: with the backbone's compression a wire pulled alone alternated between two taut
+        # sets at |F| 168 for all 50 iterations (tests/test_compression.py). So from iteration
+        # ``_FORCE_SEARCH`` on, the step must lower |F|^2 (Armijo's on the force, which g is at x: the
+        # Newton direction on F descends it), the largest of ``_STEPS`` that does, V's own step where
+        # none does. A while loop, not a branch: under a vmap over samples it runs no trial at all
+        # until some sample is that far (a branch would be a select, its force evaluated every time).
+        n = steps.shape[0]
+        gg = jnp.dot(g, g)
+        noise = (1e-9 * (1.0 + jnp.max(jnp.abs(sm.E * x)))) ** 2  # |F| this small: converged
+
+        def more(c):
+            return sm.has_friction & (it >= _FORCE_SEARCH) & (c[0] < n) & ~c[1]
+
+        def next_step(c):
+            s = steps[c[0]]
+            y = x + s * d
+            F = sm.force_value(y, sm.load_grad(y))
+            ok = jnp.dot(F, F) <= (1.0 - 1e-4 * s) * gg + noise
+            return jnp.where(ok, c[0], c[0] + 1), ok
+
+        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
+        return jnp.where(found, steps[jnp.minimum(j, n - 1)] * d, step)
 
     def body(state):
         x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
@@ -566,11 +586,11 @@ def _newton(sm: _Sample, x0, HL0):
         # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
         # it stays a branch there, and a robot without friction skips its terms and the LU solve
         rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, s_t, H + HL, g0)
-        g = g0 + rest
+        g = g0 + rest  # F(x)
         d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
         d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
         d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
-        step = search(x, d, t, rest, g, sm.value(x, t, short, s_t), short)
+        step = force_search(x, d, g, search(x, d, t, rest, g, sm.value(x, t, short, s_t), short), it)
         x_new = x + step
         # SR1 update of the load's curvature from the change of its gradient along the step
         gl_new = sm.load_grad(x_new)
@@ -585,7 +605,7 @@ def _newton(sm: _Sample, x0, HL0):
         return (state[3] < MAX_ITER) & ~state[4]
 
     init = (x0, HL0, sm.load_grad(x0), jnp.asarray(0), jnp.asarray(False))
-    x, HL, _, _, _ = jax.lax.while_loop(cond, body, init)
+    x, HL = jax.lax.while_loop(cond, body, init)[:2]
     return x, HL
 
 
