@@ -441,8 +441,7 @@ class _Sample:
 
         Its load part is ``-(G_tip^T f + G_M^T g)``; unloaded, the Jacobians ``G`` are constants (their
         change multiplies ``f = g = 0``), so derivatives in ``f`` and ``g`` cost two products."""
-        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
-        wires = (self.A * self._spread(self.piece_factors(x))).T @ tau
+        wires = self._wires_force(x)
 
         def loaded(y):
             Gt, Gm = _load_jacobians(self.lengths, y)
@@ -454,12 +453,15 @@ class _Sample:
 
         return self.E * x + self._deviation(x) + wires + jax.lax.cond(self.loaded, loaded, unloaded, x)
 
+    def _wires_force(self, x):
+        """The wires' part of ``F`` (2P,): ``sum_k tau_k T_k a_k``, their tensions past friction."""
+        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
+        return (self.A * self._spread(self.piece_factors(x))).T @ tau
+
     def force_value(self, x, load_grad):
         """``F(x)`` (2P,) given the load's gradient there (:meth:`load_grad`): its value alone, for the
         Newton step's safeguard (:meth:`force` is the one differentiated)."""
-        tau = self.k * jnp.maximum(self.stretch(x), 0.0)
-        return self.E * x + self._deviation(x) + (self.A * self._spread(self.piece_factors(x))).T @ tau + load_grad
-
+        return self.E * x + self._deviation(x) + self._wires_force(x) + load_grad
 
     def friction_matrix(self, x, t, s=None, s_t=None):
         """What friction adds to ``dF/dx`` beyond ``V``'s Hessian with the mean factors ``t`` (2P, 2P),
