@@ -238,8 +238,8 @@ def test_a_wire_pulled_alone_with_friction_and_compression_reaches_the_generator
 def test_every_cold_solve_with_friction_compression_clearance_and_a_load_is_a_root():
     """1000 random commands and directions of motion on the three-segment robot, with friction, the
     backbone's compression, the hole clearance, a weight and a tip force at once: every cold solve
-    ends at ``F = 0``. Before the line search asked for a lower ``|F|`` under friction, 6 of them
-    ended at |F| up to 203 (cycling between taut sets)."""
+    ends at ``F = 0``. Before friction's safeguard (from the 8th iteration a step must lower ``|F|``), 6
+    of them ended at |F| up to 203 (cycling between taut sets)."""
     rob = robot()
     rng = np.random.default_rng(0)
     Q = jnp.asarray(rng.uniform(-3.0, 1.0, (1000, rob.n_wires)))
