@@ -47,7 +47,7 @@ slower (1000 FTDCR v4 samples, 4 pieces, interleaved runs: 58-62 against 52-58 u
 ``axial_compliance`` per segment spread over its pieces) times the tension of the wires that cross it,
 and every wire's path through it with it: ``s = s0 - G tau``, ``G = X diag(a) X^T`` (``X`` (N, P) the
 pieces each wire crosses), ``tau = k max(s, 0)``. For a given bending ``s`` is the root of the
-piecewise-linear ``s + G k max(s, 0) = s0`` (:meth:`_Sample.relax`), ``V`` gains the backbone's axial
+piecewise-linear ``s + G k max(s, 0) = s0`` (:func:`_relax`), ``V`` gains the backbone's axial
 energy ``tau^T G tau / 2``, the wires' Hessian is ``A^T W (I + G W)^-1 A`` (the taut wires in series
 with the backbone) and the tip's kinematics takes the shortened lengths (:func:`compressed_lengths`).
 
@@ -108,7 +108,7 @@ MAX_STEP = 0.5
 #: ``curvature_freedom`` regularisation: at ``r = 0`` a segment's pieces deviate from their mean bending
 #: by this fraction of the rod's variation.
 _FREEDOM_EPS = 1e-3
-#: Semismooth Newton steps for the stretch of wires that compress the backbone (:meth:`_Sample.relax`):
+#: Semismooth Newton steps for the stretch of wires that compress the backbone (:func:`_relax`):
 #: piecewise linear, so a few reach the root (checked in the tests).
 _RELAX_ITER = 6
 #: Step sizes of the line search, tried from the largest down.
@@ -352,10 +352,6 @@ class _Sample:
     def shortening(self, x):
         """The hole clearance's shortening of each wire's path, ``C |b|`` (N,), mm (0 without it)."""
         return self.C @ _guarded_norm(x.reshape(-1, 2))
-
-    def relax(self, s0):
-        """The stretch (N,) of wires whose tension compresses the backbone (:func:`_relax`)."""
-        return _relax(s0, self.k, self.G)
 
     def stretch(self, x, shortening=None, k=None):
         """``s`` (N,), mm; ``shortening`` (N,): the clearance's, frozen (a Newton step's), else at ``x``;

@@ -4,7 +4,7 @@ path of every wire that crosses the segment.
 Every taut wire pushes its end disk toward the base, so a segment's backbone carries the tension of
 all the wires that cross it, its own and the distal segments'. It shortens by ``a_j`` (its axial
 compliance ``L / EA``, um per N) times that tension, and every wire through it is slackened by as
-much (:meth:`tension_zones.model._equilibrium._Sample.relax`): one wire pulled alone loses a little;
+much (:func:`tension_zones.model._equilibrium._relax`): one wire pulled alone loses a little;
 when all segments bend together, the proximal backbone carries every wire's tension and the distal
 wires lose most. The segments' shortening moves the tip as well. One parameter per segment. Bounded
 by the wires' own compliance (``1 / k``): a backbone that gives more than a wire does not hold it.
