@@ -118,6 +118,12 @@ def test_an_effect_outside_the_library_is_flagged_not_misnamed(tmp_path):
     rep = run(tmp_path, "drift", RobotTruth(drift_mm=0.4))  # a slow tracker drift: no effect makes it
     assert rep["unexplained_structure"] is True
     assert names(rep) == []
+    # far above the noise floor (4.8x) with structure left, the joint look went on from the refit short of
+    # the share (a registration) and kept nothing: together its path explains less than a quarter
+    jl = [rd["joint_look"] for rd in rep["rounds"] if "joint_look" in rd]
+    assert len(jl) == 1 and not jl[0]["kept"] and jl[0]["share_held_out"] < jl[0]["share_needed"] == 0.25
+    md = markdown({**rep, "plots": []})
+    assert "a joint look went on from registration" in md and "-> not kept" in md
 
 
 def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsys):

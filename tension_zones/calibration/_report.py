@@ -228,10 +228,16 @@ def markdown(report: dict) -> str:
                          + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
                                      + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
                                      for c in screened))
-        la = rd.get("look_ahead")
+        la, jl = rd.get("look_ahead"), rd.get("joint_look")
         for t in rd["tried"]:
             verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
                                                     else "not significant")
+            if t.get("short_of_share"):
+                verdict = (f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
+                           f"short of the {t['share_needed']:.1%} one effect needs"
+                           + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else ""))
+            elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
+                verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
             if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
                 verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
             lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
@@ -251,6 +257,15 @@ def markdown(report: dict) -> str:
                 line += (f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
                          f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
             lines.append(line + f" -> the branch of **{la['kept']}** is kept")
+        if jl:
+            lines.append(
+                f"- nothing kept on its own, the loop far above the noise floor with structure left: a joint look went on "
+                f"from {jl['first']} with refits that need no share of the excess of their own (every other test "
+                f"stands). It adds {', '.join(jl['added']) or 'nothing'}"
+                + (f" and removes {', '.join(jl['removed'])}" if jl["removed"] else "")
+                + f": held-out RMSE {jl['rmse_held_out_mm']:.4f} mm, {jl['share_held_out']:.1%} of the excess "
+                f"(needed {jl['share_needed']:.0%}), drop {jl['sse_drop']:.1f} (needed {jl['needed']:.1f}) -> "
+                + ("**kept**" if jl["kept"] else "not kept"))
         for t in rd.get("removed", []):
             lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
                          f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
