@@ -305,3 +305,21 @@ def test_a_round_with_nothing_to_score_ends_the_loop_cleanly(tmp_path):
                     library=(BY_NAME["variable_curvature"],)).to_json()
     assert names(rep) == [] and rep["rounds"] == [] and not rep["unexplained_structure"]
     assert rep["rmse_after_mm"] == rep["rmse_before_mm"] < 1.3 * rep["noise_floor_mm"]
+
+
+def test_the_shipped_ftdcr_report_predicts_its_validation_file_as_it_says():
+    """The FTDCR v4 report that ships (the CLI's, `examples/README.md`): its final model, put back into the
+    model, predicts `val.csv` to the error it reports, under issue 15's 5 mm; the loop's joint look added
+    its last effects, and the report says so."""
+    from tension_zones.calibration import predict_report, rmse
+
+    report = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
+    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
+    train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=robot.n_wires)
+    val = read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=robot.n_wires, servo_ids=train.servo_ids)
+    err = rmse(predict_report(report, robot, val) - val.p)
+    assert abs(err - report["rmse_validate_mm"]) < 1e-6 and err <= 5.0
+    jl = [rd["joint_look"] for rd in report["rounds"] if "joint_look" in rd]
+    assert len(jl) == 1 and jl[0]["kept"] and jl[0]["share_held_out"] >= jl[0]["share_needed"]
+    assert set(jl[0]["added"]) <= set(report["model"]["active"])
+    assert "a joint look went on from" in markdown(report) and "-> **kept**" in markdown(report)
