@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -37,7 +38,7 @@ def _pyplot():
 #: Fixed margins (the figures' sizes and labels are fixed): ``tight_layout`` drew every figure an
 #: extra time to measure them (500-sample set, three runs each: the residual plots 1.45-1.61 s with
 #: it, 1.09-1.54 s without; the paths plot 0.43-0.58 s, 0.31-0.43 s).
-_RESIDUAL_GRID = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.9, "wspace": 0.06, "hspace": 0.16}
+_RESIDUAL_GRID = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.87, "wspace": 0.06, "hspace": 0.16}
 _PATHS_GRID = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.95, "wspace": 0.22, "hspace": 0.3}
 
 
@@ -54,8 +55,9 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
     mask = res.train | res.held
     # the fits on the training part: the held-out samples' residuals are out of sample
     comps = {"before (nominal fit)": _components(pb.residuals(res.theta_before, res.nominal), feats),
-             "after (" + (", ".join(e["name"] for e in res.effects) or "no effect added") + ")":
-                 _components(pb.residuals(res.theta_selected, res.active), feats)}
+             "after": _components(pb.residuals(res.theta_selected, res.active), feats)}
+    # the effects added go on a line of their own: in the panels' titles a long list runs into its neighbours
+    added = textwrap.fill("after: " + (", ".join(e["name"] for e in res.effects) or "no effect added"), 150)
     lim = 1.1 * max(np.percentile(np.abs(c[mask]), 99.5) for c in comps.values())
     xlabels = {"bending_direction": "bending direction (deg, base frame)",
                "motion": "motion rel. to bending dir. (deg; 0 = bending further)"}
@@ -79,7 +81,7 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
                     ax.set_xlabel(xlabels[feat], fontsize=8)
         axes[0, 0].legend(fontsize=7, loc="upper right")
         fig.suptitle(f"{Path(pb.data.source).name}: measured - predicted tip position "
-                     f"(dashed: +-2 noise sigma)", fontsize=10)
+                     f"(dashed: +-2 noise sigma)\n{added}", fontsize=10)
         path = out_dir / fname
         _save(fig, path)
         plt.close(fig)
