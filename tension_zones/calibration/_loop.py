@@ -39,7 +39,8 @@ For any robot (one segment or many) and any reader:
    floor) with a significant drop for all its parameters. Far above the floor the excess is the sum of
    many missing effects, and several small real ones can each fall short of the share: on FTDCR v4 the
    wires' drift, the geometry and the routing twist explain 8.2, 9.4 and 14.3 % of it one after the
-   other, 28.7 % together (validation 5.78 -> 4.29 mm). Report the
+   other (the first two short of the 11.3-11.7 % one needs there), 28.7 % together (validation
+   5.78 -> 4.29 mm). Report the
    error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
    before the selection is over.
