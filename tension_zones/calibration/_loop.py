@@ -430,7 +430,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # training excess and a sixth of the held-out one, and no effect but the preload moves them)
                 tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
                 drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
-                share, share_train = _shares(err, err_new, tr0, tr1, noise["floor_mm"])
+                share, share_train = _share(err, err_new, noise["floor_mm"]), _share(tr0, tr1, noise["floor_mm"])
                 share_needed = 0.0 if st.relaxed else min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
                 tests = (drop > need and err_new < (1.0 - min_gain) * err and drop_train > need
                          and (not s.get("second_look") or share >= SECOND_LOOK_SHARE))
@@ -518,7 +518,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             end_alt = ending(alt)
             added = [a for a in alt.active if a not in st.active]
             dof = sum(int(sl[a].stop - sl[a].start) for a in added)
-            share = _shares(end[1], end_alt[1], 1.0, 1.0, noise["floor_mm"])[0]
+            share = _share(end[1], end_alt[1], noise["floor_mm"])
             drop = (end[1] ** 2 - end_alt[1] ** 2) * m / unit_of(end[1])
             need = chi2_quantile(alpha, max(dof, 1))
             ok = bool(added) and share >= min_excess and drop > need
@@ -625,14 +625,11 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                       baselines=bl, seconds=time.perf_counter() - t0)
 
 
-def _shares(held0, held1, train0, train1, floor) -> tuple[float, float]:
-    """The fractions of the held-out and the training mean square's excess over the noise floor that
-    a refit removes."""
-    def share(a, b):
-        excess = a**2 - floor**2
-        return (a**2 - b**2) / excess if excess > 0 else 0.0
-
-    return share(held0, held1), share(train0, train1)
+def _share(before: float, after: float, floor: float) -> float:
+    """The fraction of a mean square's excess over the noise floor (RMSE ``before``) that a change to
+    RMSE ``after`` removes."""
+    excess = before**2 - floor**2
+    return (before**2 - after**2) / excess if excess > 0 else 0.0
 
 
 def _reset(theta, block: slice, values) -> np.ndarray:
