@@ -1,3 +1,4 @@
+import gc
 import os
 import tempfile
 
@@ -40,6 +41,31 @@ from hypothesis import settings  # noqa: E402
 
 settings.register_profile("ci", max_examples=40, deadline=None)
 settings.load_profile("ci")
+
+
+_MAPS_SOFT_LIMIT = 30_000
+
+
+def _memory_maps() -> int:
+    try:
+        with open("/proc/self/maps", "rb") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux: no such limit to watch
+        return 0
+
+
+@pytest.fixture(autouse=True)
+def _free_compiled_programs():
+    """Drop JAX's in-memory compiled programs when this worker holds too many. Each program XLA:CPU
+    loads holds about 28 memory maps (its code and data pages), and a worker of the suite compiles
+    thousands: one reached 53 297 maps of Linux's default limit of 65 530 (``vm.max_map_count``) in a
+    full run, and past that limit loading the next program crashes the worker (seen three times, inside
+    ``deserialize_executable``, always late in the run). Clearing after every module instead cost the
+    suite its speed (programs shared between modules compiled again), so only past a soft limit."""
+    yield
+    if _memory_maps() > _MAPS_SOFT_LIMIT:
+        jax.clear_caches()
+        gc.collect()
 
 
 @pytest.fixture
