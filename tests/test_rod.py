@@ -222,9 +222,10 @@ def test_a_warm_start_reaches_the_cold_start_equilibrium(m, friction):
     """``solve_warm`` from another solve's state (its equilibrium and learnt load curvature, at other
     parameters and commands) lands on the equilibrium a cold solve finds, and returns its own state;
     its derivatives are the cold solve's (the state carries none). Loaded: weight and a tip force.
-    Jitted: run eagerly, its dozens of one-primitive programs went through the suite's shared
-    compilation cache, and twice in about a dozen full runs a worker crashed inside JAX's reading of
-    one of them back (``deserialize_executable``; not reproduced alone, in 6 paired runs)."""
+    Jitted: eagerly it compiled dozens of one-primitive programs. Its worker crashed here three times
+    in full runs, inside ``deserialize_executable``: late in a run a worker held over 50 000 memory
+    maps (about 28 per loaded program), near Linux's limit of 65 530, and loading one more failed; the
+    suite now frees its programs past a soft limit (``conftest.py``)."""
     solve, solve_warm = jax.jit(E.solve, static_argnums=1), jax.jit(E.solve_warm, static_argnums=1)
     robot = tz.Robot([SEG, tz.Design(4, 40.0, 3.0, wire_stiffness=40.0, backbone_EI=1800.0)])
     st = Structure(robot.n_wires_per_segment, m)
