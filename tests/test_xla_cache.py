@@ -141,3 +141,28 @@ def test_classes_outside_the_package_are_keyed_by_their_source(tmp_path, monkeyp
     assert len(d1) == 64 and _xla.classes_digest([Mine]) != d1
     Local = type("Local", (Effect,), {"__module__": "__main__"})  # e.g. defined in a notebook
     assert _xla.classes_digest([Local]) is None
+
+
+def test_clearing_jax_caches_frees_the_memory_maps_the_suite_watches():
+    """The suite's guard against ``vm.max_map_count`` (``conftest._free_compiled_programs``) relies on
+    ``jax.clear_caches`` unloading compiled programs: each loaded one holds memory maps until then."""
+    import gc
+
+    import jax
+    import jax.numpy as jnp
+    import pytest
+    from conftest import _memory_maps
+
+    if _memory_maps() == 0:
+        pytest.skip("no /proc/self/maps on this system")
+    jax.clear_caches()
+    gc.collect()
+    before = _memory_maps()
+    fns = [jax.jit(lambda x, k=k: jnp.sin(x) * k) for k in range(40)]
+    for k, f in enumerate(fns):
+        f(jnp.ones(3 + k)).block_until_ready()
+    loaded = _memory_maps()
+    jax.clear_caches()
+    gc.collect()
+    assert loaded - before >= 40  # at least one map per program
+    assert _memory_maps() - before < 0.5 * (loaded - before)  # most freed, though the functions live on
