@@ -359,6 +359,8 @@ def cmd_calibrate(args) -> None:
                  f"{report['rmse_validate_aligned_mm']:.4f} mm)")
         for k, b in (report.get("baselines") or {}).items():
             line += f"; {k} baseline {b['rmse_validate_mm']:.4f} mm"
+    if report["warnings"]:
+        line += f"; warnings ({len(report['warnings'])}): " + " | ".join(report["warnings"])
     print(line)
     if not args.quiet:
         print(f"wrote {out / 'report.json'}, {out / 'report.md'} and {len(report['plots'])} plots")

@@ -59,6 +59,9 @@ MAX_WORKERS = 4
 MIN_WORK = 1024
 #: The loop's short refits, in Levenberg-Marquardt passes.
 SCREEN_ITERATIONS = 6
+#: An effect of the clock is judged on the recording's last this share (acquisition order), fitted
+#: before it: the share the hold-out of an unlabelled recording takes from its tail.
+LATER_SHARE = 0.25
 #: In robust mode a held-out sample beyond this many noise sigmas (3-D) is a glitch for decisions.
 GLITCH_C = 8.0
 
@@ -87,6 +90,11 @@ class Fits:
         self.w_train = self.train.astype(float)
         self.w_all = (self.train | self.held).astype(float)
         self.held_idx = np.flatnonzero(self.held)
+        # the later samples: the last LATER_SHARE of the data file in acquisition order
+        rows = np.flatnonzero(self.train | self.held)
+        cut = rows[min(round((1.0 - LATER_SHARE) * len(rows)), len(rows) - 1)]
+        self.w_early = (self.train & (np.arange(len(self.train)) < cut)).astype(float)
+        self.late_idx = np.flatnonzero(self.held & (np.arange(len(self.held)) >= cut))
         self.sigma = None
 
     def fit(self, theta0, active, weights=None, max_iter: int = 40) -> np.ndarray:
@@ -135,6 +143,19 @@ class Fits:
         """A full refit on the training part: (theta, plain held-out RMSE, decision error)."""
         th = self.fit(theta0, active)
         return (th, *self.held_only(th, active))
+
+    def later(self, theta0, active, theta_base, base_active):
+        """An effect of the clock judged as it is used, on samples after those it was fitted on: the
+        models ``active`` (from ``theta0``) and ``base_active`` (from ``theta_base``) fitted on the
+        training samples before the recording's last ``LATER_SHARE``, then evaluated on the held-out
+        samples in it. Returns (sum of squares with, without, their count)."""
+        if len(self.late_idx) == 0:
+            return 0.0, 0.0, 0
+        th1 = self.fit(theta0, active, self.w_early)
+        th0 = self.fit(theta_base, base_active, self.w_early)
+        sse = [float(np.sum(self.pb.residuals(th, a, samples=self.late_idx) ** 2))
+               for th, a in ((th1, active), (th0, base_active))]
+        return sse[0], sse[1], len(self.late_idx)
 
     def refit_all(self, theta0, active, residuals: bool = True):
         """A refit on every sample of the data file: (theta, residuals (N, 3) or None)."""

@@ -70,11 +70,13 @@ import numpy as np
 
 from ..model import Design, Robot
 from ._baselines import baselines
+from ._caveats import bound_lines, caveats, knife_edges
 from ._data import Dataset, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
+from ._register import GlobalRegistration, global_registration, rotation_vector
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -133,6 +135,9 @@ class Result:
     features: dict
     baselines: dict | None
     seconds: float
+    #: the measurement frame found before the loop (:mod:`._register`); the problem's data are moved
+    #: into the base frame by it where it was applied
+    registration: GlobalRegistration | None = None
 
     @property
     def data(self) -> Dataset:
@@ -149,6 +154,8 @@ class Result:
         out = {
             "data": pb.data.source,
             "frame": pb.data.frame,
+            "global_registration": None if self.registration is None else self.registration.to_json(),
+            "measurement_frame": measurement_frame(pb, self.theta_after, self.active, self.registration),
             "n_samples": int((self.train | self.held).sum()),
             "n_train": int(self.train.sum()),
             "n_held_out": int(self.held.sum()),
@@ -178,6 +185,10 @@ class Result:
                       "theta": np.asarray(self.theta_after).tolist(), "clock": pb.clock},
             "seconds": self.seconds,
         }
+        out["knife_edges"] = knife_edges(self.rounds)
+        out["bound_warnings"] = bound_lines(self.at_bound, pb.describe(self.theta_after, self.active),
+                                            pb.describe(self.theta_declared, self.active))
+        out["warnings"] = caveats(out)
         if self.val.any():
             out.update(n_validate=int(self.val.sum()), rmse_validate_mm=self.rmse["validate"],
                        rmse_validate_aligned_mm=self.rmse["validate_aligned"], baselines=self.baselines)
@@ -242,7 +253,7 @@ def _flagged(structure: dict) -> bool:
 def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None, library=None, nominal=None,
               holdout: float = 0.25, robust: bool = False, alpha: float = 1e-3, min_gain: float = 0.01,
               min_excess: float = 0.25, max_rounds: int | None = None, log=None,
-              workers: int | None = None) -> Result:
+              workers: int | None = None, register: bool = True) -> Result:
     """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
 
     ``validate``: a second recording of the same robot, only predicted after the selection.
@@ -250,7 +261,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     :func:`.effects.library`). ``log`` (callable taking a str) reports progress. ``workers``: processes
     that run the loop's independent fits alongside this one (:mod:`._fits`; None: one per spare core
     where starting them is safe and the recording is large enough, ``TENSION_ZONES_WORKERS`` if set);
-    the result is the same with any.
+    the result is the same with any. ``register``: move the recording into the robot's base frame
+    first (:mod:`._register`); False takes its frame as it is, for the frame parameters' local fits.
     """
     t0 = time.perf_counter()
     say = log or (lambda s: None)
@@ -265,12 +277,26 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     library = tuple(b for b in library if b.size(model, phys0) > 0)  # e.g. no twist between segments of one
     train, held = data.split(holdout)
     n_fit = data.n_samples
+    blocks = tuple(nominal) + tuple(library)
+    # the drift's clock is the data file's: a validation file takes the drift at its nearest end
+    clock = data_clock(data)
+    reg = None
+    if register:
+        recorded = data if validate is None else data.concat(validate)
+        reg = _register(Problem(model, robot, recorded, blocks, clock=clock), data, train,
+                        [b.name for b in nominal], library)
+        say(f"global registration: {reg.reason}")
+    if reg is not None and reg.applied:  # the loop runs in the robot's base frame
+        data = reg.to_base(data)
+        validate = None if validate is None else reg.to_base(validate)
+        if data.frame == "base":  # a recording declared in the base frame but far from it
+            nominal = tuple(nominal) + tuple(b for b in library if b.name == "registration")
+            library = tuple(b for b in library if b.name != "registration")
     full = data if validate is None else data.concat(validate)
     val = np.arange(full.n_samples) >= n_fit
     train = np.r_[train, np.zeros(full.n_samples - n_fit, bool)]
     held = np.r_[held, np.zeros(full.n_samples - n_fit, bool)]
-    # the drift's clock is the data file's: a validation file takes the drift at its nearest end
-    pb = Problem(model, robot, full, tuple(nominal) + tuple(library), clock=data_clock(data))
+    pb = Problem(model, robot, full, blocks, clock=clock)
     cand_names = [b.name for b in library]
     nominal_names = [b.name for b in nominal]
     sl = pb.spec.slices()
@@ -291,8 +317,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     rod = [b.name for b in library if b.pieces_for(model) > 1]
     warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
     warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
-    with Runner(fits, n_workers,
-                (model, robot, full, tuple(nominal) + tuple(library), pb.clock), warm) as run:
+    with Runner(fits, n_workers, (model, robot, full, blocks, pb.clock), warm) as run:
         # without a worker, a spare core compiles on a thread what the loop will run: the rod's program
         # where the first round scores it for sure (the model carries a load from the start: known tip
         # forces, a declared weight), the final refit's once the first fit has fixed the fits' rows
@@ -422,7 +447,11 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                                      key=lambda s: s["screened_rmse_mm"])
             chosen = significant[:TRIES_PER_ROUND]
             jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
-            for s, (th_new, plain_new, err_new, r_new) in zip(chosen, run.map("refit", jobs)):
+            # an effect of the clock must also predict the later samples from the earlier ones
+            timed = [i for i, s in enumerate(chosen) if getattr(blocks[s["name"]], "of_time", False)]
+            done = run.map("refit", jobs) + run.map("later", [(*jobs[i], theta, active) for i in timed])
+            later = dict(zip(timed, done[len(jobs):]))
+            for i, (s, (th_new, plain_new, err_new, r_new)) in enumerate(zip(chosen, done)):
                 drop = (err**2 - err_new**2) * m / unit
                 need = chi2_quantile(alpha, max(s["dof"], 1))
                 # the training part's gain, tested the same way: not a share of the held-out gain, since the
@@ -434,10 +463,15 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 share_needed = 0.0 if st.relaxed else min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
                 tests = (drop > need and err_new < (1.0 - min_gain) * err and drop_train > need
                          and (not s.get("second_look") or share >= SECOND_LOOK_SHARE))
+                extra = {}
+                if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
+                    sse_with, sse_without, n_late = later[i]
+                    extra = {"sse_drop_later": (sse_without - sse_with) / unit, "n_later": n_late}
+                    tests = tests and extra["sse_drop_later"] > need
                 ok = tests and share >= share_needed
                 tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
                               "share_held_out": share, "share_needed": share_needed, "share_train": share_train,
-                              "sse_drop": drop, "sse_drop_train": drop_train,
+                              "sse_drop": drop, "sse_drop_train": drop_train, **extra,
                               "needed": need, "significant": bool(ok), "short_of_share": bool(tests and not ok),
                               "theta": th_new, "err": err_new, "score": s["score"]})
                 say(f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
@@ -524,6 +558,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             ok = bool(added) and share >= min_excess and drop > need
             jl = {"first": first, "effects": alt.active[len(nominal_names):], "added": added,
                   "removed": [a for a in st.active if a not in alt.active], "rmse_held_out_mm": end_alt[0],
+                  "rmse_before_mm": end[0],
                   "share_held_out": share, "share_needed": min_excess, "sse_drop": drop, "needed": need,
                   "kept": ok}
             say(f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
@@ -622,7 +657,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                       std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
                       rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
                       robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
-                      baselines=bl, seconds=time.perf_counter() - t0)
+                      baselines=bl, seconds=time.perf_counter() - t0, registration=reg)
 
 
 def _share(before: float, after: float, floor: float) -> float:
@@ -638,6 +673,25 @@ def _reset(theta, block: slice, values) -> np.ndarray:
     th = np.array(theta, float)
     th[block] = values[block]
     return th
+
+
+def _register(pb: Problem, data: Dataset, rows, nominal, library) -> GlobalRegistration:
+    """The data file's frame against the robot's base (:mod:`._register`), from the nominal model at
+    its declared values and the start values the data give (the patterns' rotations), on ``rows``."""
+    reg_block = next((b for b in library if b.name == "registration"), None)
+    reach = None
+    if data.frame == "base":
+        if reg_block is None:  # no registration to reach the frame: the data are taken as declared
+            return GlobalRegistration(R=np.eye(3), t=np.zeros(3), rmse_mm=float("nan"), explained=float("nan"),
+                                      applied=False, reason="declared base frame")
+        hi = reg_block.bounds(pb.model, pb._phys_np)[1]
+        reach = (float(hi[0]), float(hi[3]))
+
+    def predict(moved):
+        theta = pb.null if moved is None else _initial(pb, moved, pb.null, nominal)
+        return _base_frame_prediction(pb, theta, nominal)[: data.n_samples]  # (a validation file follows)
+
+    return global_registration(predict, data, rows, reach)
 
 
 def _initial(pb: Problem, data: Dataset, theta, nominal) -> np.ndarray:
@@ -681,6 +735,23 @@ def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
     return pb.predict(th, [a for a in active if a not in frame])
 
 
+def measurement_frame(pb: Problem, theta, active, reg: GlobalRegistration | None) -> dict:
+    """The measurement frame against the robot's base, ``p_measured = R p_base + t``: the global
+    registration composed with the fitted frame blocks (offset, registration; a common turn about the
+    robot's axis is the patterns' rotation's, not in ``R``). Rotation vector (deg) and translation (mm)."""
+    sl, on = pb.spec.slices(), dict(zip(pb.names, pb.on(active)))
+    out = {"p": np.r_[np.zeros((1, 3)), np.eye(3)], "R": np.tile(np.eye(3), (4, 1, 1))}
+    for b in pb.spec.blocks:
+        if b.name in ("offset", "registration") and b.name in active:
+            out = b.on_outputs(np.asarray(theta)[sl[b.name]], out, pb.model, on)
+    p = np.asarray(out["p"])
+    R, t = (p[1:] - p[0]).T, p[0]
+    if reg is not None and reg.applied:
+        R, t = reg.R @ R, reg.R @ t + reg.t
+    return {"rotation_deg": np.degrees(rotation_vector(R)).tolist(), "translation_mm": t.tolist(),
+            "axis": R[:, 2].tolist()}
+
+
 def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
     """The tip positions (N, 3) a calibration report's final model predicts for ``data`` (a recording
     of ``robot``, e.g. new commands or a validation file; path-dependent state starts afresh)."""
@@ -691,4 +762,6 @@ def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
     clock = m.get("clock")
     pb = Problem(RobotModel.of(robot), robot, data, tuple(BY_NAME[n] for n in m["blocks"]),
                  clock=None if clock is None else tuple(clock))
-    return pb.predict(np.asarray(m["theta"], float), m["active"])
+    p = pb.predict(np.asarray(m["theta"], float), m["active"])
+    reg = GlobalRegistration.from_json(report.get("global_registration"))
+    return p if reg is None else reg.to_measured(p)

@@ -169,6 +169,16 @@ def markdown(report: dict) -> str:
               f"its parameters{' and validation errors' if val else ''} are that fit's. "
               + f"Loss: {'Huber (robust)' if report['robust'] else 'least squares'}. "
               f"Nominal parameters always fitted: {', '.join(report['nominal_parameters'])}.", ""]
+    if report.get("warnings"):
+        lines += ["## Read first", ""] + [f"- {w}" for w in report["warnings"]] + [""]
+    reg = report.get("global_registration")
+    if reg and reg.get("applied"):
+        lines += [(f"The recording was moved into the robot's base frame before the loop ({reg['reason']}): "
+                   f"rotation {reg['angle_deg']:.2f} deg (vector {np.round(reg['rotation_deg'], 3).tolist()} deg), "
+                   f"translation {np.round(reg['translation_mm'], 3).tolist()} mm; the nominal model's tip error "
+                   f"there {reg['rmse_mm']:.3f} mm, {reg['explained']:.1%} of the tip motion's variance explained. "
+                   "Positions and frame parameters below are in that frame; `measurement_frame` in report.json "
+                   "is the whole transform."), ""]
     lines += ["## Before and after (tip-position RMSE, mm)", "",
               "| model | held out | / noise floor |" + (" validation | validation, mean offset removed |" if val else ""),
               "| --- | ---: | ---: |" + (" ---: | ---: |" if val else ""),
@@ -246,6 +256,8 @@ def markdown(report: dict) -> str:
                          f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
                          f"{t['needed']:.1f})"
                          + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
+                         + (f", of the later samples' {t['sse_drop_later']:.1f} (fitted on the earlier ones)"
+                            if "sse_drop_later" in t else "")
                          + f" -> {verdict}")
         if la:
             a, b = la["branches"]

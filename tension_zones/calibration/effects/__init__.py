@@ -30,9 +30,9 @@ ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Fr
        RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Compression(), Drift(),
        BendingFriction(), Marker(), Geometry())
 #: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
-#: in an unregistered tracker frame, whose origin is never known, nor which way each segment's wires
-#: point (a rotation of the tracker is a candidate: the registration).
-NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "offset")}
+#: in an unregistered tracker frame, whose origin and tilt are never known, nor which way each segment's
+#: wires point (the registration leaves the turn about the axis to the patterns' rotations).
+NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "offset", "registration")}
 #: Not candidates either: in the base frame the offset is part of the registration.
 EXCLUDED = {"base": ("offset",), "tracker": ()}
 #: Candidates only where asked for (``library(frame, opt_in=...)``, the CLI's ``--effects +NAME``): a

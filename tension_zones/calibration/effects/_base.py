@@ -39,6 +39,10 @@ class Effect:
     #: True for an effect whose state depends on the samples before (a hysteresis of the solved
     #: bending): while it is on, the model's ``with_memory`` variant predicts the whole recording
     memory = False
+    #: True for an effect of the clock rather than the path (a drift): besides the loop's tests, it must
+    #: predict the recording's later samples when fitted on its earlier ones (``Fits.later``), since
+    #: held-out groups interleaved with its training samples only test an interpolation
+    of_time = False
 
     # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
     def size(self, model, phys0) -> int:

@@ -23,6 +23,7 @@ from ._base import Effect, replace
 class Drift(Effect):
     name = "drift"
     doc = "all wires' lengths drift at one rate over time (thermal expansion, creep), mm per hour"
+    of_time = True
 
     def size(self, model, phys0):
         return 1
