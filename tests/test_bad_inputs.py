@@ -44,6 +44,13 @@ def _files(tmp):
     (tmp / "list.json").write_text("[1, 2]")
     (tmp / "latin1.json").write_bytes(b'{"length_mm": 20, "note": "\xe9"}')
     (tmp / "scen_dir.json").mkdir()
+    # strict JSON: duplicate keys, non-finite literals, deep nesting
+    (tmp / "d3_dup.json").write_text('{"n_wires": 3, "length_mm": 20, "length_mm": 200, "pitch_radius_mm": 2}')
+    (tmp / "scen_nan.json").write_text('{"n_wires": [3], "joint_uncertainty_mm": NaN}')
+    (tmp / "scen_big.json").write_text('{"n_wires": [3], "length_mm": 1e400}')
+    (tmp / "space_inf.json").write_text('{"n_wires": 3, "pitch_radius_mm": [1, Infinity]}')
+    (tmp / "scen_deep.json").write_text('{"weights": ' * 40 + "1" + "}" * 40)
+    (tmp / "scen_deeper.json").write_text("[" * 100_000 + "]" * 100_000)
     for name, change in {
         "unknown": {"colour": "red"},
         "n_str": {"n_wires": "3"},
@@ -111,6 +118,18 @@ CLI = [
      "need at least 10"),
     ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
     ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
+    # strict JSON in every reader (design, scenario, space)
+    ("json-design-duplicate-key", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_dup.json", "--out", "{tmp}/o"],
+     "d3_dup.json': key 'length_mm' appears twice (JSON keys must be unique)"),
+    ("json-scenario-nan", OPT + ["{tmp}/scen_nan.json", "--out", "{tmp}/o"],
+     "scen_nan.json': key 'joint_uncertainty_mm' is NaN; only finite numbers are allowed"),
+    ("json-scenario-overflow", OPT + ["{tmp}/scen_big.json", "--out", "{tmp}/o"],
+     "key 'length_mm' is 1e400 (too large for a float)"),
+    ("json-space-infinity", ["explore", "--space", "{tmp}/space_inf.json", "--out", "{tmp}/o"],
+     "space_inf.json': key 'pitch_radius_mm[1]' is Infinity"),
+    ("json-scenario-deep", OPT + ["{tmp}/scen_deep.json", "--out", "{tmp}/o"], "nests deeper than 32 levels"),
+    ("json-scenario-recursion", OPT + ["{tmp}/scen_deeper.json", "--out", "{tmp}/o"],
+     "scen_deeper.json': nests deeper than 32 levels"),
     # usage errors (argparse): one line too
     ("no-command", [], "the following arguments are required: COMMAND"),
     ("unknown-command", ["frobnicate"], "invalid choice: 'frobnicate'"),

@@ -251,20 +251,83 @@ def missing_physical_keys(d: dict[str, Any]) -> list[str]:
     return [k for k in PHYSICAL_KEYS if k not in d]
 
 
+#: Deepest nesting a JSON input may have: a robot design file needs four levels; deeper is not an
+#: input of this package (and would otherwise exhaust the parser's recursion).
+MAX_JSON_DEPTH = 32
+
+
+class _BadJSON(ValueError):
+    """A JSON text that parses but is refused (duplicate key, non-finite number)."""
+
+
+class _NonFinite:
+    """Stands for a ``NaN``/``Infinity`` literal (or a number that overflows) until its key is known."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+
+def _unique_keys(pairs):
+    seen = {}
+    for k, v in pairs:
+        if k in seen:
+            raise _BadJSON(f"key {k!r} appears twice (JSON keys must be unique)")
+        seen[k] = v
+    return seen
+
+
+def _finite_float(text: str):
+    v = float(text)
+    return v if math.isfinite(v) else _NonFinite(f"{text} (too large for a float)")
+
+
+def _finite_int(text: str):
+    if len(text.lstrip("-")) > 308:  # beyond any float (and Python's digit limit for int())
+        return _NonFinite(f"{text[:12]}... (too large for a float)")
+    return int(text)
+
+
+def _check_tree(value, where: str = "", depth: int = 1) -> None:
+    """Refuse nesting deeper than :data:`MAX_JSON_DEPTH` and the non-finite stand-ins, naming the key."""
+    if isinstance(value, _NonFinite):
+        raise _BadJSON(f"key {where or '(top level)'!r} is {value.text}; only finite numbers are allowed")
+    if not isinstance(value, (dict, list)):
+        return
+    if depth > MAX_JSON_DEPTH:
+        raise _BadJSON(f"nests deeper than {MAX_JSON_DEPTH} levels (at key {where!r})")
+    items = value.items() if isinstance(value, dict) else enumerate(value)
+    for k, v in items:
+        _check_tree(v, f"{where}[{k}]" if isinstance(k, int) else f"{where}.{k}" if where else k, depth + 1)
+
+
 def read_json(path, what: str):
-    """A JSON file's content; a missing, unreadable or malformed file is a ValueError naming it
-    (``what``). A UTF-8 byte-order mark is allowed."""
+    """A JSON file's content, strictly: every user-written JSON file is read here.
+
+    A missing, unreadable or malformed file, a key that appears twice in an object, a ``NaN`` or
+    ``Infinity`` literal (or a number too large for a float) and nesting deeper than
+    :data:`MAX_JSON_DEPTH` levels are one-line ValueErrors naming the file (``what``) and the key.
+    A UTF-8 byte-order mark is allowed.
+    """
     path = Path(path)
+    name = f"{what} {str(path)!r}"
     try:
-        return json.loads(path.read_text(encoding="utf-8-sig"))
+        text = path.read_text(encoding="utf-8-sig")
+        value = json.loads(text, object_pairs_hook=_unique_keys, parse_constant=_NonFinite,
+                           parse_float=_finite_float, parse_int=_finite_int)
+        _check_tree(value)
+        return value
     except FileNotFoundError:
-        raise ValueError(f"{what} {str(path)!r} does not exist") from None
+        raise ValueError(f"{name} does not exist") from None
     except IsADirectoryError:
-        raise ValueError(f"{what} {str(path)!r} is a folder, not a file") from None
+        raise ValueError(f"{name} is a folder, not a file") from None
     except UnicodeDecodeError as e:
-        raise ValueError(f"{what} {str(path)!r} is not UTF-8 text (byte {e.start})") from None
+        raise ValueError(f"{name} is not UTF-8 text (byte {e.start})") from None
     except json.JSONDecodeError as e:
-        raise ValueError(f"{what} {str(path)!r} is not valid JSON: {e}") from None
+        raise ValueError(f"{name} is not valid JSON: {e}") from None
+    except _BadJSON as e:
+        raise ValueError(f"{name}: {e}") from None
+    except RecursionError:
+        raise ValueError(f"{name}: nests deeper than {MAX_JSON_DEPTH} levels") from None
 
 
 def _what(value) -> str:
