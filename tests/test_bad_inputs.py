@@ -28,6 +28,19 @@ GOOD_SCENARIO = {"n_wires": [3], "theta_L_deg": [30, 80, 50], "delta_deg": [0, 3
                  "optimizer": {"starts": 1, "steps": 2}}
 
 
+def _scaled(lines, columns, factor):
+    """CSV lines with ``columns`` multiplied by ``factor``, as text."""
+    head = lines[0].split(",")
+    idx = [head.index(c) for c in columns]
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for i in idx:
+            cells[i] = repr(float(cells[i]) * factor)
+        out.append(",".join(cells))
+    return "\n".join(out) + "\n"
+
+
 def _files(tmp):
     """The inputs and existing outputs the rows refer to."""
     (tmp / "old.png").write_bytes(b"an earlier map")
@@ -77,6 +90,12 @@ def _files(tmp):
     (tmp / "nonnum.csv").write_text("\n".join(rows[:5] + [",".join(cells)] + rows[6:81]) + "\n")
     train = tz.example_path("ftdcr_v4/train.csv").read_text()
     (tmp / "opencr.csv").write_text("\n".join(train.splitlines()[:60]) + "\n")
+    # recordings that cannot be millimetres of their robot
+    (tmp / "cal_metres.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 1e-3))
+    (tmp / "cal_um.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 1e3))
+    (tmp / "cal_still.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 0.0))
+    lines = train.splitlines()[:130]
+    (tmp / "opencr_x57.csv").write_text(_scaled(lines, [h for h in lines[0].split(",") if h.startswith("servo_")], 57))
     (tmp / "truncated.csv").write_text(train[:3000])
     (tmp / "ftdcr.json").write_text(tz.example_path("ftdcr_v4/design.json").read_text())
     (tmp / "report").mkdir()
@@ -116,6 +135,18 @@ CLI = [
     ("cal-unknown-format", CAL + ["--format", "xml", "--out", "{tmp}/o"], "invalid choice: 'xml'"),
     ("cal-too-few-samples", ["calibrate", "{tmp}/short.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
      "need at least 10"),
+    ("cal-positions-in-metres", ["calibrate", "{tmp}/cal_metres.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     ("cal_metres.csv: the tip positions span 0.0103 mm (column 'px', their widest) for a robot 20 mm long, less than "
+      "1% of it: are the positions in metres? Millimetres are expected (10.3 mm in millimetres)")),
+    ("cal-positions-in-micrometres", ["calibrate", "{tmp}/cal_um.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     ("cal_um.csv: the tip positions span 1.03e+04 mm (column 'px', their widest) for a robot 20 mm long, but two tips "
+      "of a robot that long are at most 40 mm apart (allowed 80 mm)")),
+    ("cal-tip-never-moves", ["calibrate", "{tmp}/cal_still.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "cal_still.csv: the tip never moves: the tip positions span 0 mm"),
+    ("cal-servo-scaled", ["calibrate", "{tmp}/opencr_x57.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json",
+                          "--out", "{tmp}/o"],
+     ("opencr_x57.csv: column 'servo_4_mm', row 2: wire displacement 39.3466 mm, but wire 1 moves at most 28.3 mm "
+      "(2 x pi x its pitch radii summed over the 1 segment(s) it crosses, 4.5 mm)")),
     ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
     ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
     # strict JSON in every reader (design, scenario, space)
@@ -319,6 +350,17 @@ def _sweep(**kw):
     return lambda: sweep_grid(fn, kw.pop("design", d), th, np.radians([0.0, 90.0]), quiet=True, **kw)
 
 
+def _nominal(rows=slice(0, 40), **change):
+    """The first samples of the shipped nominal recording, with fields replaced."""
+    import dataclasses
+
+    data = tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3)
+    keep = np.zeros(data.n_samples, bool)
+    keep[rows] = True
+    data = data.subset(keep)
+    return dataclasses.replace(data, **change)
+
+
 API = [
     ("design-two-wires", lambda: tz.Design(2, 20.0, 2.0), "n_wires must be at least 3"),
     ("design-float-wires", lambda: tz.Design(3.0, 20.0, 2.0), "n_wires must be an integer"),
@@ -364,6 +406,8 @@ API = [
     ("calibrate-workers", lambda: tz.calibrate(tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3),
                                                tz.Design(3, 20.0, 2.0), workers=-1),
      "workers must be a whole number, 0 or more, got -1"),
+    ("calibrate-tip-never-moves", lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
+     "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long"),
     ("over-grid-mismatch", lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2),
                                                                    np.zeros(2), 0.4, np.ones(3)),
      "mask must have shape"),
@@ -380,3 +424,23 @@ def test_api_bad_input(call, needle):
 
 def test_the_api_table_is_large():
     assert len(API) >= 30 and len({c[0] for c in API}) == len(API)
+
+
+# ------------------------------------------------------------------------------------------------
+# The plausibility checks pass every shipped recording (and the lab's FTDCR v6 where it is at hand)
+# ------------------------------------------------------------------------------------------------
+V6 = "/work/shared/data/opencr_ftdcr_v6"
+RECORDINGS = [(tz.example_path(f"synthetic/{n}.csv"), tz.example_path(f"synthetic/{n}.design.json"), "model")
+              for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")]
+RECORDINGS += [(tz.example_path(f"ftdcr_v4/{n}.csv"), tz.example_path("ftdcr_v4/design.json"), "opencr")
+               for n in ("train", "tendon_pull")]
+RECORDINGS += [(f"{V6}/{n}.csv", f"{V6}/design.json", "opencr") for n in ("train", "tendon_pull")]
+
+
+@pytest.mark.parametrize("data, design, fmt", RECORDINGS, ids=lambda x: str(x).split("examples/")[-1])
+def test_shipped_recordings_are_plausible(data, design, fmt):
+    if not os.path.exists(data):
+        pytest.skip(f"{data} is not on this machine")
+    robot = tz.Robot.from_json(design)
+    tz.load_data(data, fmt, n_wires=robot.n_wires).check_against(robot)
+

@@ -33,6 +33,20 @@ MAX_FORCE_N = 1e3
 #: More bad rows than this fraction (or a run of more than MAX_BAD_RUN) is not "isolated".
 MAX_BAD_FRACTION = 0.05
 MAX_BAD_RUN = 2
+#: Plausibility of a recording against its robot (:meth:`Dataset.check_against`), total length ``L``.
+#: The tip of an inextensible backbone stays within ``L`` of the base, so two tip positions are at
+#: most ``2 L`` apart; a spread above ``MAX_SPREAD_PER_LENGTH L`` (twice that: a marker beyond the
+#: tip, registration error) is not millimetres of this robot.
+MAX_SPREAD_PER_LENGTH = 4.0
+#: In the base frame the tip is at most ``L`` from the origin; allowed: twice that.
+MAX_REACH_PER_LENGTH = 2.0
+#: A tip that moves less than 1 % of ``L`` bends the robot by about 0.02 rad: nothing to calibrate
+#: on, and the signature of positions in metres (a thousandth of the millimetres).
+MIN_SPREAD_PER_LENGTH = 0.01
+#: A wire shortens by ``r theta`` in each segment it crosses (``r`` its pitch radius there,
+#: ``theta`` <= pi the segment's bend: a half turn, more than a continuum segment reaches); allowed:
+#: this many times ``pi sum r`` (wire stretch, slack taken up).
+MAX_WIRE_TRAVEL_FACTOR = 2.0
 _SERVO = re.compile(r"^servo_(\d+)_mm$")
 _TENDON = re.compile(r"tendon(\d+)_id(\d+)")
 
@@ -86,6 +100,63 @@ class Dataset:
         """(N,) True where a recording starts (path-dependent state restarts there)."""
         s = np.asarray(self.session)
         return np.concatenate([[True], s[1:] != s[:-1]])
+
+    def _label(self, i: int) -> str:
+        """Sample ``i`` as the file names it: its sample number, or its data row (OpenCR)."""
+        return f"row {self.sample[i]}" if self.frame == "tracker" else f"sample {self.sample[i]}"
+
+    def _wire_column(self, k: int) -> str:
+        return f"servo_{self.servo_ids[k]}_mm" if self.servo_ids is not None else f"q{k + 1}"
+
+    def check_against(self, robot) -> None:
+        """Refuse data that cannot be millimetres of ``robot`` (a :class:`~tension_zones.model.Robot`).
+
+        With ``L`` the robot's total length (see the module's constants for the arguments):
+
+        * the tip positions' spread (the largest side of their bounding box, from the 0.5th to the
+          99.5th percentile so that a few tracker glitches do not count) at least
+          ``MIN_SPREAD_PER_LENGTH L`` (a tip that never moves, or positions in metres) and at most
+          ``MAX_SPREAD_PER_LENGTH L``; in the base frame also the tip's distance from the base at
+          most ``MAX_REACH_PER_LENGTH L``;
+        * every wire's commanded displacement at most ``MAX_WIRE_TRAVEL_FACTOR pi sum_j r_kj``, its
+          pitch radii summed over the segments it crosses (geometry allows ``pi sum_j r_kj``).
+
+        Raises:
+            DataError: one line with the numbers (file, column and sample for a wire).
+        """
+        name = Path(self.source).name or "the data"
+        L = float(np.sum(np.asarray(robot.lengths)))
+        cols = POS_COLS if self.frame == "base" else TIP_COLS
+        side = np.abs(np.percentile(self.p, 99.5, axis=0) - np.percentile(self.p, 0.5, axis=0))
+        a = int(np.argmax(side))
+        spread, lo, hi = float(side[a]), MIN_SPREAD_PER_LENGTH * L, MAX_SPREAD_PER_LENGTH * L
+        what = f"the tip positions span {spread:.3g} mm (column {cols[a]!r}, their widest) for a robot {L:g} mm long"
+        if spread < lo <= 1000 * spread <= hi:
+            raise DataError(f"{name}: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it: are the positions in "
+                            f"metres? Millimetres are expected ({1000 * spread:.3g} mm in millimetres)")
+        if spread < lo:
+            raise DataError(f"{name}: the tip never moves: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it "
+                            f"({lo:.3g} mm)")
+        if spread > hi:
+            raise DataError(f"{name}: {what}, but two tips of a robot that long are at most {2 * L:g} mm apart "
+                            f"(allowed {hi:g} mm): are the positions in millimetres?")
+        if self.frame == "base":
+            reach = np.linalg.norm(self.p, axis=1)
+            i = int(np.argmax(reach))
+            if reach[i] > MAX_REACH_PER_LENGTH * L:
+                raise DataError(f"{name}: {self._label(i)}: the tip is {reach[i]:.4g} mm from the base, but a robot "
+                                f"{L:g} mm long reaches {L:g} mm (allowed {MAX_REACH_PER_LENGTH * L:g} mm): are the "
+                                "positions in millimetres and in the base frame?")
+        radii = np.where(robot.crosses, np.asarray(robot.route_radii), 0.0)
+        bound = MAX_WIRE_TRAVEL_FACTOR * math.pi * radii.sum(axis=1)
+        over = np.abs(self.q) > bound[None, :]
+        if np.any(over):
+            i, k = (int(x) for x in np.argwhere(over)[0])
+            n_seg = int(np.sum(robot.crosses[k]))
+            raise DataError(f"{name}: column {self._wire_column(k)!r}, {self._label(i)}: wire displacement "
+                            f"{self.q[i, k]:g} mm, but wire {k + 1} moves at most {bound[k]:.3g} mm ({MAX_WIRE_TRAVEL_FACTOR:g} "
+                            f"x pi x its pitch radii summed over the {n_seg} segment(s) it crosses, "
+                            f"{radii[k].sum():g} mm): are the commands in millimetres?")
 
     def split(self, holdout: float = 0.25):
         """Boolean masks ``(train, held_out)``: the split belongs to the data.

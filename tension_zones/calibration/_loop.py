@@ -255,6 +255,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     t0 = time.perf_counter()
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
+    for d in (data,) if validate is None else (data, validate):
+        d.check_against(robot)
     n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
                              * robot.n_segments)
     library = default_library(data.frame) if library is None else tuple(library)
