@@ -147,6 +147,9 @@ CLI = [
                           "--out", "{tmp}/o"],
      ("opencr_x57.csv: column 'servo_4_mm', row 2: wire displacement 39.3466 mm, but wire 1 moves at most 28.3 mm "
       "(2 x pi x its pitch radii summed over the 1 segment(s) it crosses, 4.5 mm)")),
+    ("cal-validate-is-training", CAL + ["--validate", "{tmp}/cal.csv", "--out", "{tmp}/o"],
+     ("validation file cal.csv: 80 of its 80 rows repeat rows of the training file cal.csv (same commands and tip "
+      "positions; the same recording)")),
     ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
     ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
     # strict JSON in every reader (design, scenario, space)
@@ -408,6 +411,9 @@ API = [
      "workers must be a whole number, 0 or more, got -1"),
     ("calibrate-tip-never-moves", lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
      "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long"),
+    ("calibrate-validate-overlaps", lambda: tz.calibrate(_nominal(), tz.Design(3, 20.0, 2.0),
+                                                         validate=_nominal(rows=slice(20, 40))),
+     "20 of its 20 rows repeat rows of the training file nominal_3w.csv"),
     ("over-grid-mismatch", lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2),
                                                                    np.zeros(2), 0.4, np.ones(3)),
      "mask must have shape"),
@@ -444,3 +450,12 @@ def test_shipped_recordings_are_plausible(data, design, fmt):
     robot = tz.Robot.from_json(design)
     tz.load_data(data, fmt, n_wires=robot.n_wires).check_against(robot)
 
+
+def test_the_shipped_validation_recording_is_a_separate_one():
+    from tension_zones.calibration._data import check_validation
+
+    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
+    train = tz.load_data(tz.example_path("ftdcr_v4/train.csv"), "opencr", n_wires=9)
+    val = tz.load_data(tz.example_path("ftdcr_v4/val.csv"), "opencr", n_wires=9, servo_ids=train.servo_ids)
+    val.check_against(robot)
+    check_validation(train, val)

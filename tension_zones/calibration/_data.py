@@ -47,6 +47,10 @@ MIN_SPREAD_PER_LENGTH = 0.01
 #: ``theta`` <= pi the segment's bend: a half turn, more than a continuum segment reaches); allowed:
 #: this many times ``pi sum r`` (wire stretch, slack taken up).
 MAX_WIRE_TRAVEL_FACTOR = 2.0
+#: Positions and commands compared to this many decimals (1 um) when looking for shared rows.
+SHARED_DECIMALS = 3
+#: A validation file sharing more than this fraction of its rows with the training file is refused.
+MAX_SHARED_FRACTION = 0.1
 _SERVO = re.compile(r"^servo_(\d+)_mm$")
 _TENDON = re.compile(r"tendon(\d+)_id(\d+)")
 
@@ -480,6 +484,29 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     return Dataset(sample=good.astype(np.int64) + 1, q=q, f=np.zeros((len(good), 3)), p=p, rot=None,
                    frame="tracker", groups=tuple(re.sub(r"_hold$", "", s) for s in labs),
                    timestamp=t[good], servo_ids=servo_ids, dropped=dropped, source=str(path))
+
+
+def shared_rows(train: Dataset, other: Dataset) -> int:
+    """How many samples of ``other`` repeat one of ``train`` (the same commands and the same tip position,
+    to :data:`SHARED_DECIMALS` decimals): independent recordings share none."""
+    def rows(d):
+        return np.round(np.concatenate([d.q, d.p], axis=1), SHARED_DECIMALS)
+
+    if other.n_wires != train.n_wires:
+        return 0
+    seen = {r.tobytes() for r in rows(train) + 0.0}  # + 0.0: -0.0 and 0.0 alike
+    return sum(r.tobytes() in seen for r in rows(other) + 0.0)
+
+
+def check_validation(train: Dataset, validate: Dataset) -> None:
+    """Refuse a validation recording that shares more than :data:`MAX_SHARED_FRACTION` of its samples
+    with the training one (:func:`shared_rows`): predicting it would not validate anything."""
+    k = shared_rows(train, validate)
+    if k > MAX_SHARED_FRACTION * validate.n_samples:
+        same = "; the same recording" if k == validate.n_samples == train.n_samples else ""
+        raise DataError(f"validation file {Path(validate.source).name}: {k} of its {validate.n_samples} rows repeat "
+                        f"rows of the training file {Path(train.source).name} (same commands and tip positions"
+                        f"{same}); a validation must be a separate recording")
 
 
 #: ``--format`` -> reader. A reader takes ``(path, n_wires=, drop_bad=)`` (and may take more keywords).

@@ -70,7 +70,7 @@ import numpy as np
 
 from ..model import Design, Robot
 from ._baselines import baselines
-from ._data import Dataset, pattern_family
+from ._data import Dataset, check_validation, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
@@ -257,6 +257,8 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     robot = Robot(robot) if isinstance(robot, Design) else robot
     for d in (data,) if validate is None else (data, validate):
         d.check_against(robot)
+    if validate is not None:
+        check_validation(data, validate)
     n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
                              * robot.n_segments)
     library = default_library(data.frame) if library is None else tuple(library)
