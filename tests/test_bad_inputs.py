@@ -459,3 +459,17 @@ def test_the_shipped_validation_recording_is_a_separate_one():
     val = tz.load_data(tz.example_path("ftdcr_v4/val.csv"), "opencr", n_wires=9, servo_ids=train.servo_ids)
     val.check_against(robot)
     check_validation(train, val)
+
+
+def test_a_figure_not_computed_is_null_not_zero(tmp_path):
+    """A deflection weight of 0 skips the statics: the worst deflection and the statics-infeasible
+    count are NaN in the result and null in result.json, never 0."""
+    from tension_zones._io import write_json
+    from tension_zones.design._optimise import evaluate_design
+
+    sc = tz.parse_scenario({**GOOD_SCENARIO, "n_wires": [4], "weights": {"deflection": 0.0}})
+    row = evaluate_design(sc, tz.Design(4, 20.0, 2.0))
+    assert np.isnan(row["worst_deflection_mm"]) and np.isnan(row["statics_infeasible_poses"])
+    assert np.isfinite(row["worst_position_uncertainty_mm"])
+    written = json.loads(write_json(tmp_path / "r.json", row).read_text())
+    assert written["worst_deflection_mm"] is None and written["statics_infeasible_poses"] is None
