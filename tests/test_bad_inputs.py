@@ -76,12 +76,17 @@ def _files(tmp):
         "starts_zero": {"optimizer": {"starts": 0}},
         "load_short": {"load_N": [1, 2]},
         "arc_fixed": {"forbidden_arc_deg": [10, 50]},
+        "radius_half": {"length_mm": 20, "pitch_radius_mm": [0.5, 50]},
+        "step_beyond": {"theta_L_deg": [5, 85, 100]},
     }.items():
         (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
     # calibration inputs, cut from the shipped examples
     design = json.loads(tz.example_path("synthetic/nominal_3w.design.json").read_text())
     (tmp / "d3.json").write_text(json.dumps(design))
     (tmp / "d3_nstr.json").write_text(json.dumps({**design, "n_wires": "3"}))
+    seg = {"n_wires": 3, "length_mm": 60, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240]}
+    (tmp / "shared_hole.json").write_text(json.dumps({"segments": [
+        seg, {**seg, "wire_angles_deg": [40, 160, 280], "route_angles_deg": [[0], [160], [280]]}]}))
     rows = tz.example_path("synthetic/nominal_3w.csv").read_text().splitlines()
     (tmp / "cal.csv").write_text("\n".join(rows[:81]) + "\n")
     (tmp / "short.csv").write_text("\n".join(rows[:15]) + "\n")
@@ -198,6 +203,15 @@ CLI = [
      "--theta-step must be a positive number"),
     ("sweep-zero-delta-step", SWEEP + ["--delta-step", "0", "--out", "{tmp}/s.npz"],
      "--delta-step must be a positive number"),
+    ("sweep-theta-step-beyond-range", SWEEP + ["--theta-step", "86", "--out", "{tmp}/s.npz"],
+     "--theta-step 86 leaves 1 grid point on 0..85 deg; it must be at most 85"),
+    ("sweep-delta-step-beyond-range", SWEEP + ["--delta-step", "400", "--out", "{tmp}/s.npz"],
+     "--delta-step 400 leaves 1 grid point on 0..360 deg; it must be at most 360"),
+    ("sweep-radius-over-half-length", SWEEP[:6] + ["50", "--out", "{tmp}/s.npz"],
+     ("--pitch-radius: pitch_radius 50 mm is more than half the length 20 mm: a wire that far out meets the "
+      "centre of curvature before the segment bends 2 rad")),
+    ("sweep-absurd-length", SWEEP[:4] + ["1e308", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+     "--length: length must be at most 1e+06 mm (a kilometre), got 1e+308"),
     ("sweep-grid-too-fine", SWEEP + ["--theta-step", "1e-6", "--out", "{tmp}/s.npz"],
      "sweeps at most 20,000,000"),
     ("sweep-too-many-wires", ["sweep", "--wires", "4096", "--length", "20", "--pitch-radius", "2",
@@ -235,6 +249,14 @@ CLI = [
     ("opt-starts-zero", OPT + ["{tmp}/starts_zero.json", "--out", "{tmp}/o"], "'optimizer.starts'"),
     ("opt-load-short", OPT + ["{tmp}/load_short.json", "--out", "{tmp}/o"], "'load_N'"),
     ("opt-arc-needs-free", OPT + ["{tmp}/arc_fixed.json", "--out", "{tmp}/o"], "needs free_wire_angles"),
+    ("opt-radius-over-half-length", OPT + ["{tmp}/radius_half.json", "--out", "{tmp}/o"],
+     "scenario key 'pitch_radius_mm': max 50 mm is more than half the length_mm 20 mm"),
+    ("opt-step-beyond-range", OPT + ["{tmp}/step_beyond.json", "--out", "{tmp}/o"],
+     "scenario key 'theta_L_deg': step 100 is larger than the range 5..85: the grid would be 5 alone"),
+    ("cal-routing-shares-a-hole", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/shared_hole.json", "--out",
+                                   "{tmp}/o"],
+     ("shared_hole.json': segment 1: its routing runs wire 1 of segment 1 through segment 0 in the hole of wire 1 "
+      "of segment 0 (0 deg, radius 4.5 mm); each wire needs its own hole")),
     ("opt-out-is-file", OPT + ["{tmp}/good.json", "--out", "{tmp}/file.txt"], "must be a folder"),
     ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"],
      "already holds 'result.json'"),
@@ -409,6 +431,25 @@ API = [
     ("calibrate-workers", lambda: tz.calibrate(tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3),
                                                tz.Design(3, 20.0, 2.0), workers=-1),
      "workers must be a whole number, 0 or more, got -1"),
+    ("design-radius-over-half-length", lambda: tz.Design(3, 20.0, 50.0),
+     "pitch_radius 50 mm is more than half the length 20 mm"),
+    ("design-absurd-length", lambda: tz.Design(3, 1e308, 2.0), "length must be at most 1e+06 mm (a kilometre)"),
+    ("file-radius-over-half-length", _from_dict(pitch_radius_mm=50),
+     "pitch_radius_mm 50 mm is more than half the length_mm 20 mm"),
+    ("space-radius-over-half-length", lambda: tz.parse_space({"length_mm": [20, 40], "pitch_radius_mm": [1, 15]}),
+     "space key 'pitch_radius_mm': max 15 mm is more than half the min length_mm 20 mm"),
+    ("robot-routing-shares-a-hole", lambda: tz.Robot.from_dict({"segments": [
+        {"n_wires": 3, "length_mm": 40, "pitch_radius_mm": 3},
+        {"n_wires": 3, "length_mm": 30, "pitch_radius_mm": 3, "wire_angles_deg": [60, 180, 300],
+         "route_angles_deg": [[60], [120], [300]]}]}),
+     ("segment 1: its routing runs wire 2 of segment 1 through segment 0 in the hole of wire 2 of segment 0 "
+      "(120 deg, radius 3 mm)")),
+    ("metrics-theta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 60.0, 1.0, 0.4),
+     "theta_L = 60 is beyond +-pi: radians are expected (np.radians(60) = 1.0472)"),
+    ("metrics-delta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 1.0, 66.0, 0.4),
+     "delta = 66 is beyond +-2 pi: radians are expected (np.radians(66) = 1.15192)"),
+    ("measures-negative-dq", lambda: tz.pose_measures(tz.Design(3, 20.0, 2.0), 1.0, 0.5, -0.4),
+     "dq must be non-negative (a bound on each joint's error, mm), got -0.4"),
     ("calibrate-tip-never-moves", lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
      "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long"),
     ("calibrate-validate-overlaps", lambda: tz.calibrate(_nominal(), tz.Design(3, 20.0, 2.0),

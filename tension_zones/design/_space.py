@@ -26,6 +26,7 @@ from ..model._design import (
     DEFAULT_BACKBONE_EI,
     DEFAULT_WIRE_STIFFNESS,
     Design,
+    _check_radius,
     read_json,
 )
 from ._scenario import _err, _grid, _merge, _num, _wire_counts
@@ -155,7 +156,7 @@ class Space:
         cols = self.columns(n)
         leaves = {field: np.asarray(cols[key], float) for key, (field, _, _) in FIELDS.items()}
         leaves["wire_angles"] = np.radians(np.stack([cols[f"wire_angle_{k + 1}_deg"] for k in range(n)], 1))
-        template = jax.tree_util.tree_structure(Design(n, 1.0, 1.0))
+        template = jax.tree_util.tree_structure(Design(n, 2.0, 1.0))
         return jax.tree_util.tree_unflatten(template, [leaves[f] for f in _DATA_FIELDS])
 
 
@@ -251,6 +252,10 @@ def parse_space(d: dict) -> Space:
     if kind != "fixed" and max(v) - min(v) >= 360.0 / max(counts):
         raise _err(OFFSET, f"spans {max(v) - min(v):g} deg, must stay below 360/n = "
                            f"{360.0 / max(counts):g} deg for {max(counts)} wires (wires would meet)", KIND)
+    try:  # the largest radius against the shortest length: every design of the space is valid
+        _check_radius(min(fields["length_mm"][1]), max(fields["pitch_radius_mm"][1]), names=("max", "min length_mm"))
+    except ValueError as e:
+        raise _err("pitch_radius_mm", str(e), KIND) from None
     method, points, designs = _sample(d.get("sample", {}))
     load = raw["load_N"]
     if load is not None:

@@ -25,6 +25,14 @@ DEFAULT_BACKBONE_EI = 1200.0
 DEFAULT_WIRE_STIFFNESS = 75.0
 
 _SCALARS = ("length", "pitch_radius", "wire_stiffness", "backbone_EI", "preload")
+#: The largest length and pitch radius taken (mm): a kilometre is beyond any continuum robot, and far
+#: larger values overflow the measures' squares and products into meaningless numbers.
+MAX_SIZE_MM = 1e6
+#: The largest pitch radius, as a fraction of the length. Bent by ``theta``, a segment's centre of
+#: curvature is ``L / theta`` from its backbone; a wire on the inside stays short of it only while
+#: ``r < L / theta``, so ``r <= L / 2`` leaves bends up to 2 rad (115 deg), past the 90 deg of the
+#: workspace grids.
+MAX_RADIUS_PER_LENGTH = 0.5
 _DATA_FIELDS = ("length", "pitch_radius", "wire_angles", "wire_stiffness", "backbone_EI", "preload")
 
 
@@ -96,6 +104,7 @@ class Design:
         values["wire_angles"] = wire_angles
         for name in _SCALARS:
             _check_scalar(name, values[name])
+        _check_radius(values["length"], values["pitch_radius"])
         _check_angles(values["wire_angles"], n_wires)
         object.__setattr__(self, "n_wires", n_wires)
         for name in _DATA_FIELDS:
@@ -192,6 +201,7 @@ class Design:
         if angles is not None:
             _check_angles(angles, kw["n_wires"], field="wire_angles_deg")
             kw["wire_angles"] = np.radians(np.asarray(angles, dtype=float))
+        _check_radius(d["length_mm"], d["pitch_radius_mm"], names=("pitch_radius_mm", "length_mm"))
         design = cls(**kw)
         missing = missing_physical_keys(d) if warn_missing else []
         if missing:
@@ -375,8 +385,20 @@ def _check_scalar(name: str, value, field: str | None = None) -> None:
         raise ValueError(f"{name} must be finite, got {v}")
     if field in ("length", "pitch_radius", "wire_stiffness") and v <= 0:
         raise ValueError(f"{name} must be positive, got {v}")
+    if field in ("length", "pitch_radius") and v > MAX_SIZE_MM:
+        raise ValueError(f"{name} must be at most {MAX_SIZE_MM:g} mm (a kilometre), got {v:g}")
     if field in ("backbone_EI", "preload") and v < 0:
         raise ValueError(f"{name} must be non-negative, got {v}")
+
+
+def _check_radius(length, pitch_radius, names=("pitch_radius", "length")) -> None:
+    """The pitch radius at most :data:`MAX_RADIUS_PER_LENGTH` of the length (concrete values only)."""
+    if not (_is_concrete(length) and _is_concrete(pitch_radius)):
+        return
+    r, L = float(np.asarray(pitch_radius)), float(np.asarray(length))
+    if r > MAX_RADIUS_PER_LENGTH * L:
+        raise ValueError(f"{names[0]} {r:g} mm is more than half the {names[1]} {L:g} mm: a wire that far out meets "
+                         f"the centre of curvature before the segment bends {1 / MAX_RADIUS_PER_LENGTH:g} rad")
 
 
 def _check_angles(angles, n_wires: int, field: str = "wire_angles") -> None:
