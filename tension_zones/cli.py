@@ -558,11 +558,20 @@ def _one_line(e: Exception) -> str:
     return " ".join(line for line in lines if line) or type(e).__name__
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line on stderr, without the source line Python would print."""
+    print(f"tension-zones: warning: {_one_line(message)}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)  # --help and usage errors (one line, status 2) exit here
     try:
-        args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            args.func(args)
     except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files
         print(f"tension-zones: error: {_one_line(e)}", file=sys.stderr)
         return 2

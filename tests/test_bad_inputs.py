@@ -76,6 +76,7 @@ def _files(tmp):
         "starts_zero": {"optimizer": {"starts": 0}},
         "load_short": {"load_N": [1, 2]},
         "arc_fixed": {"forbidden_arc_deg": [10, 50]},
+        "seed_negative": {"optimizer": {"seed": -1}},
         "radius_half": {"length_mm": 20, "pitch_radius_mm": [0.5, 50]},
         "step_beyond": {"theta_L_deg": [5, 85, 100]},
     }.items():
@@ -85,6 +86,7 @@ def _files(tmp):
     (tmp / "d3.json").write_text(json.dumps(design))
     (tmp / "d3_nstr.json").write_text(json.dumps({**design, "n_wires": "3"}))
     seg = {"n_wires": 3, "length_mm": 60, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240]}
+    (tmp / "route_seg0.json").write_text(json.dumps({"segments": [{**seg, "route_angles_deg": [[0], [1], [2]]}, seg]}))
     (tmp / "shared_hole.json").write_text(json.dumps({"segments": [
         seg, {**seg, "wire_angles_deg": [40, 160, 280], "route_angles_deg": [[0], [160], [280]]}]}))
     rows = tz.example_path("synthetic/nominal_3w.csv").read_text().splitlines()
@@ -249,6 +251,11 @@ CLI = [
     ("opt-starts-zero", OPT + ["{tmp}/starts_zero.json", "--out", "{tmp}/o"], "'optimizer.starts'"),
     ("opt-load-short", OPT + ["{tmp}/load_short.json", "--out", "{tmp}/o"], "'load_N'"),
     ("opt-arc-needs-free", OPT + ["{tmp}/arc_fixed.json", "--out", "{tmp}/o"], "needs free_wire_angles"),
+    ("opt-seed-negative", OPT + ["{tmp}/seed_negative.json", "--out", "{tmp}/o"],
+     "scenario key 'optimizer.seed': must be a non-negative integer, got -1"),
+    ("cal-route-on-segment-0", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/route_seg0.json", "--out", "{tmp}/o"],
+     ("route_seg0.json': segment 0: route_angles_deg has no place on the first segment (it gives a wire's path "
+      "through the segments before its own, and none lies before segment 0)")),
     ("opt-radius-over-half-length", OPT + ["{tmp}/radius_half.json", "--out", "{tmp}/o"],
      "scenario key 'pitch_radius_mm': max 50 mm is more than half the length_mm 20 mm"),
     ("opt-step-beyond-range", OPT + ["{tmp}/step_beyond.json", "--out", "{tmp}/o"],
@@ -514,3 +521,29 @@ def test_a_figure_not_computed_is_null_not_zero(tmp_path):
     assert np.isfinite(row["worst_position_uncertainty_mm"])
     written = json.loads(write_json(tmp_path / "r.json", row).read_text())
     assert written["worst_deflection_mm"] is None and written["statics_infeasible_poses"] is None
+
+
+def test_a_noise_floor_of_zero_does_not_divide():
+    """Noiseless data (repeated samples identical): the held-out error against a floor of 0 is finite."""
+    from tension_zones.calibration._loop import _excess
+
+    ex = _excess(0.1, 0.1, {"floor_mm": 0.0, "pairs": 10}, 50)
+    assert np.isfinite(ex["ratio_to_floor"]) and np.isfinite(ex["z"]) and ex["z"] > 0
+    assert np.isfinite(_excess(0.0, 0.0, {"floor_mm": 0.0, "pairs": 10}, 50)["z"])
+
+
+def test_a_space_with_every_field_fixed_is_one_design():
+    space = tz.parse_space({"n_wires": 3, "pitch_radius_mm": 2.0})
+    assert space.count(3) == 1 and space.columns(3)["pitch_radius_mm"].tolist() == [2.0]
+    assert np.asarray(space.batch(3).pitch_radius).tolist() == [2.0]
+
+
+def test_the_command_line_shows_a_warning_as_one_line(tmp_path, capsys, monkeypatch):
+    import warnings
+
+    from tension_zones import cli
+
+    monkeypatch.setattr(cli, "cmd_maps", lambda args: warnings.warn("first line\nsecond line", UserWarning, stacklevel=1))
+    assert main(["maps", "--wires", "3", "--out", str(tmp_path / "m.png")]) == 0
+    err = capsys.readouterr().err
+    assert err == "tension-zones: warning: first line second line\n", err

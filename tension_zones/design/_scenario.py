@@ -207,7 +207,8 @@ def parse_scenario(d: dict) -> Scenario:
             raise _err(k, f"must be true or false, got {s[k]!r}")
     for k in ("starts", "steps", "seed"):
         if isinstance(o[k], bool) or not isinstance(o[k], int) or o[k] < (0 if k == "seed" else 1):
-            raise _err(f"optimizer.{k}", f"must be a positive integer, got {o[k]!r}")
+            kind = "a non-negative" if k == "seed" else "a positive"
+            raise _err(f"optimizer.{k}", f"must be {kind} integer, got {o[k]!r}")
     load = s["load_N"]
     if not isinstance(load, (list, tuple)) or len(load) != 3:
         raise _err("load_N", f"must be [fx, fy, fz], got {load!r}")

@@ -113,7 +113,9 @@ class Space:
         return dims + ([(f"{OFFSET}_{k + 1}", kind, v) for k in range(n)] if kind != "fixed" else [])
 
     def count(self, n: int) -> int:
-        """Designs sampled for ``n`` wires."""
+        """Designs sampled for ``n`` wires (one where every field is fixed)."""
+        if not self._dims(n):
+            return 1
         if self.method == "halton":
             return self.designs
         return math.prod(self.points if kind == "range" else len(v) for _, kind, v in self._dims(n))
@@ -121,6 +123,8 @@ class Space:
     def _samples(self, n: int) -> dict[str, np.ndarray]:
         """Each sampled dimension's values over the designs for ``n`` wires, (N,)."""
         dims = self._dims(n)
+        if not dims:  # every field fixed: one design
+            return {}
         if self.method == "halton":
             u = halton(self.designs, len(dims))
             return {key: (v[0] + u[:, j] * (v[1] - v[0]) if kind == "range"

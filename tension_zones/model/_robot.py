@@ -490,6 +490,9 @@ def _check_holes(robot: Robot, ra, rr, given) -> None:
 
 def _routing_entry(value, j: int, n: int, key: str) -> np.ndarray:
     """A segment's ``route_*`` entry as an (n, j) array, or a one-line error naming the key."""
+    if j == 0:
+        raise ValueError(f"segment 0: {key} has no place on the first segment (it gives a wire's path through the "
+                         "segments before its own, and none lies before segment 0)")
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
