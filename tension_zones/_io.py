@@ -9,6 +9,8 @@ interrupt the temporary file is removed.
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 import tempfile
 from pathlib import Path
@@ -40,3 +42,18 @@ def write_text(path, text: str) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return Path(path)
+
+
+def _null_for_nan(x):
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, dict):
+        return {k: _null_for_nan(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_null_for_nan(v) for v in x]
+    return x
+
+
+def write_json(path, value, indent: int = 2) -> Path:
+    """``value`` as strict JSON, atomically: a non-finite float (a figure not computed, NaN) is ``null``."""
+    return write_text(path, json.dumps(_null_for_nan(value), indent=indent, allow_nan=False))

@@ -240,6 +240,10 @@ def cmd_sweep(args) -> None:
         if getattr(args, name) is not None:
             _positive("--" + name.replace("_", "-"), getattr(args, name))
     steps = (args.theta_step or 5.0, args.delta_step or 2.5)
+    for flag, step, span in (("--theta-step", steps[0], 85.0), ("--delta-step", steps[1], 360.0)):
+        if step > span:  # a grid of its start alone
+            raise CLIError(f"{flag} {step:g} leaves {grid_size(span, step)} grid point on 0..{span:g} deg; "
+                           f"it must be at most {span:g}")
     size = grid_size(85.0, steps[0]) * grid_size(360.0, steps[1])
     if size > MAX_SWEEP_POSES:  # checked before the grid is built
         raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} "
@@ -556,11 +560,20 @@ def _one_line(e: Exception) -> str:
     return " ".join(line for line in lines if line) or type(e).__name__
 
 
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as one line on stderr, without the source line Python would print."""
+    print(f"tension-zones: warning: {_one_line(message)}", file=sys.stderr)
+
+
 def main(argv=None) -> int:
+    import warnings
+
     parser = build_parser()
     args = parser.parse_args(argv)  # --help and usage errors (one line, status 2) exit here
     try:
-        args.func(args)
+        with warnings.catch_warnings():
+            warnings.showwarning = _show_warning
+            args.func(args)
     except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files
         print(f"tension-zones: error: {_one_line(e)}", file=sys.stderr)
         return 2

@@ -28,6 +28,19 @@ GOOD_SCENARIO = {"n_wires": [3], "theta_L_deg": [30, 80, 50], "delta_deg": [0, 3
                  "optimizer": {"starts": 1, "steps": 2}}
 
 
+def _scaled(lines, columns, factor):
+    """CSV lines with ``columns`` multiplied by ``factor``, as text."""
+    head = lines[0].split(",")
+    idx = [head.index(c) for c in columns]
+    out = [lines[0]]
+    for line in lines[1:]:
+        cells = line.split(",")
+        for i in idx:
+            cells[i] = repr(float(cells[i]) * factor)
+        out.append(",".join(cells))
+    return "\n".join(out) + "\n"
+
+
 def _files(tmp):
     """The inputs and existing outputs the rows refer to."""
     (tmp / "old.png").write_bytes(b"an earlier map")
@@ -44,6 +57,13 @@ def _files(tmp):
     (tmp / "list.json").write_text("[1, 2]")
     (tmp / "latin1.json").write_bytes(b'{"length_mm": 20, "note": "\xe9"}')
     (tmp / "scen_dir.json").mkdir()
+    # strict JSON: duplicate keys, non-finite literals, deep nesting
+    (tmp / "d3_dup.json").write_text('{"n_wires": 3, "length_mm": 20, "length_mm": 200, "pitch_radius_mm": 2}')
+    (tmp / "scen_nan.json").write_text('{"n_wires": [3], "joint_uncertainty_mm": NaN}')
+    (tmp / "scen_big.json").write_text('{"n_wires": [3], "length_mm": 1e400}')
+    (tmp / "space_inf.json").write_text('{"n_wires": 3, "pitch_radius_mm": [1, Infinity]}')
+    (tmp / "scen_deep.json").write_text('{"weights": ' * 40 + "1" + "}" * 40)
+    (tmp / "scen_deeper.json").write_text("[" * 100_000 + "]" * 100_000)
     for name, change in {
         "unknown": {"colour": "red"},
         "n_str": {"n_wires": "3"},
@@ -56,12 +76,19 @@ def _files(tmp):
         "starts_zero": {"optimizer": {"starts": 0}},
         "load_short": {"load_N": [1, 2]},
         "arc_fixed": {"forbidden_arc_deg": [10, 50]},
+        "seed_negative": {"optimizer": {"seed": -1}},
+        "radius_half": {"length_mm": 20, "pitch_radius_mm": [0.5, 50]},
+        "step_beyond": {"theta_L_deg": [5, 85, 100]},
     }.items():
         (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
     # calibration inputs, cut from the shipped examples
     design = json.loads(tz.example_path("synthetic/nominal_3w.design.json").read_text())
     (tmp / "d3.json").write_text(json.dumps(design))
     (tmp / "d3_nstr.json").write_text(json.dumps({**design, "n_wires": "3"}))
+    seg = {"n_wires": 3, "length_mm": 60, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240]}
+    (tmp / "route_seg0.json").write_text(json.dumps({"segments": [{**seg, "route_angles_deg": [[0], [1], [2]]}, seg]}))
+    (tmp / "shared_hole.json").write_text(json.dumps({"segments": [
+        seg, {**seg, "wire_angles_deg": [40, 160, 280], "route_angles_deg": [[0], [160], [280]]}]}))
     rows = tz.example_path("synthetic/nominal_3w.csv").read_text().splitlines()
     (tmp / "cal.csv").write_text("\n".join(rows[:81]) + "\n")
     (tmp / "short.csv").write_text("\n".join(rows[:15]) + "\n")
@@ -70,6 +97,12 @@ def _files(tmp):
     (tmp / "nonnum.csv").write_text("\n".join(rows[:5] + [",".join(cells)] + rows[6:81]) + "\n")
     train = tz.example_path("ftdcr_v4/train.csv").read_text()
     (tmp / "opencr.csv").write_text("\n".join(train.splitlines()[:60]) + "\n")
+    # recordings that cannot be millimetres of their robot
+    (tmp / "cal_metres.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 1e-3))
+    (tmp / "cal_um.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 1e3))
+    (tmp / "cal_still.csv").write_text(_scaled(rows[:81], ("px", "py", "pz"), 0.0))
+    lines = train.splitlines()[:130]
+    (tmp / "opencr_x57.csv").write_text(_scaled(lines, [h for h in lines[0].split(",") if h.startswith("servo_")], 57))
     (tmp / "truncated.csv").write_text(train[:3000])
     (tmp / "ftdcr.json").write_text(tz.example_path("ftdcr_v4/design.json").read_text())
     (tmp / "report").mkdir()
@@ -109,8 +142,35 @@ CLI = [
     ("cal-unknown-format", CAL + ["--format", "xml", "--out", "{tmp}/o"], "invalid choice: 'xml'"),
     ("cal-too-few-samples", ["calibrate", "{tmp}/short.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
      "need at least 10"),
+    ("cal-positions-in-metres", ["calibrate", "{tmp}/cal_metres.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     ("cal_metres.csv: the tip positions span 0.0103 mm (column 'px', their widest) for a robot 20 mm long, less than "
+      "1% of it: are the positions in metres? Millimetres are expected (10.3 mm in millimetres)")),
+    ("cal-positions-in-micrometres", ["calibrate", "{tmp}/cal_um.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     ("cal_um.csv: the tip positions span 1.03e+04 mm (column 'px', their widest) for a robot 20 mm long, but two tips "
+      "of a robot that long are at most 40 mm apart (allowed 80 mm)")),
+    ("cal-tip-never-moves", ["calibrate", "{tmp}/cal_still.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+     "cal_still.csv: the tip never moves: the tip positions span 0 mm"),
+    ("cal-servo-scaled", ["calibrate", "{tmp}/opencr_x57.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json",
+                          "--out", "{tmp}/o"],
+     ("opencr_x57.csv: column 'servo_4_mm', row 2: wire displacement 39.3466 mm, but wire 1 moves at most 28.3 mm "
+      "(2 x pi x its pitch radii summed over the 1 segment(s) it crosses, 4.5 mm)")),
+    ("cal-validate-is-training", CAL + ["--validate", "{tmp}/cal.csv", "--out", "{tmp}/o"],
+     ("validation file cal.csv: 80 of its 80 rows repeat rows of the training file cal.csv (same commands and tip "
+      "positions; the same recording)")),
     ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
     ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
+    # strict JSON in every reader (design, scenario, space)
+    ("json-design-duplicate-key", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_dup.json", "--out", "{tmp}/o"],
+     "d3_dup.json': key 'length_mm' appears twice (JSON keys must be unique)"),
+    ("json-scenario-nan", OPT + ["{tmp}/scen_nan.json", "--out", "{tmp}/o"],
+     "scen_nan.json': key 'joint_uncertainty_mm' is NaN; only finite numbers are allowed"),
+    ("json-scenario-overflow", OPT + ["{tmp}/scen_big.json", "--out", "{tmp}/o"],
+     "key 'length_mm' is 1e400 (too large for a float)"),
+    ("json-space-infinity", ["explore", "--space", "{tmp}/space_inf.json", "--out", "{tmp}/o"],
+     "space_inf.json': key 'pitch_radius_mm[1]' is Infinity"),
+    ("json-scenario-deep", OPT + ["{tmp}/scen_deep.json", "--out", "{tmp}/o"], "nests deeper than 32 levels"),
+    ("json-scenario-recursion", OPT + ["{tmp}/scen_deeper.json", "--out", "{tmp}/o"],
+     "scen_deeper.json': nests deeper than 32 levels"),
     # usage errors (argparse): one line too
     ("no-command", [], "the following arguments are required: COMMAND"),
     ("unknown-command", ["frobnicate"], "invalid choice: 'frobnicate'"),
@@ -145,6 +205,15 @@ CLI = [
      "--theta-step must be a positive number"),
     ("sweep-zero-delta-step", SWEEP + ["--delta-step", "0", "--out", "{tmp}/s.npz"],
      "--delta-step must be a positive number"),
+    ("sweep-theta-step-beyond-range", SWEEP + ["--theta-step", "86", "--out", "{tmp}/s.npz"],
+     "--theta-step 86 leaves 1 grid point on 0..85 deg; it must be at most 85"),
+    ("sweep-delta-step-beyond-range", SWEEP + ["--delta-step", "400", "--out", "{tmp}/s.npz"],
+     "--delta-step 400 leaves 1 grid point on 0..360 deg; it must be at most 360"),
+    ("sweep-radius-over-half-length", SWEEP[:6] + ["50", "--out", "{tmp}/s.npz"],
+     ("--pitch-radius: pitch_radius 50 mm is more than half the length 20 mm: a wire that far out meets the "
+      "centre of curvature before the segment bends 2 rad")),
+    ("sweep-absurd-length", SWEEP[:4] + ["1e308", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+     "--length: length must be at most 1e+06 mm (a kilometre), got 1e+308"),
     ("sweep-grid-too-fine", SWEEP + ["--theta-step", "1e-6", "--out", "{tmp}/s.npz"],
      "sweeps at most 20,000,000"),
     ("sweep-too-many-wires", ["sweep", "--wires", "4096", "--length", "20", "--pitch-radius", "2",
@@ -182,6 +251,19 @@ CLI = [
     ("opt-starts-zero", OPT + ["{tmp}/starts_zero.json", "--out", "{tmp}/o"], "'optimizer.starts'"),
     ("opt-load-short", OPT + ["{tmp}/load_short.json", "--out", "{tmp}/o"], "'load_N'"),
     ("opt-arc-needs-free", OPT + ["{tmp}/arc_fixed.json", "--out", "{tmp}/o"], "needs free_wire_angles"),
+    ("opt-seed-negative", OPT + ["{tmp}/seed_negative.json", "--out", "{tmp}/o"],
+     "scenario key 'optimizer.seed': must be a non-negative integer, got -1"),
+    ("cal-route-on-segment-0", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/route_seg0.json", "--out", "{tmp}/o"],
+     ("route_seg0.json': segment 0: route_angles_deg has no place on the first segment (it gives a wire's path "
+      "through the segments before its own, and none lies before segment 0)")),
+    ("opt-radius-over-half-length", OPT + ["{tmp}/radius_half.json", "--out", "{tmp}/o"],
+     "scenario key 'pitch_radius_mm': max 50 mm is more than half the length_mm 20 mm"),
+    ("opt-step-beyond-range", OPT + ["{tmp}/step_beyond.json", "--out", "{tmp}/o"],
+     "scenario key 'theta_L_deg': step 100 is larger than the range 5..85: the grid would be 5 alone"),
+    ("cal-routing-shares-a-hole", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/shared_hole.json", "--out",
+                                   "{tmp}/o"],
+     ("shared_hole.json': segment 1: its routing runs wire 1 of segment 1 through segment 0 in the hole of wire 1 "
+      "of segment 0 (0 deg, radius 4.5 mm); each wire needs its own hole")),
     ("opt-out-is-file", OPT + ["{tmp}/good.json", "--out", "{tmp}/file.txt"], "must be a folder"),
     ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"],
      "already holds 'result.json'"),
@@ -300,6 +382,17 @@ def _sweep(**kw):
     return lambda: sweep_grid(fn, kw.pop("design", d), th, np.radians([0.0, 90.0]), quiet=True, **kw)
 
 
+def _nominal(rows=slice(0, 40), **change):
+    """The first samples of the shipped nominal recording, with fields replaced."""
+    import dataclasses
+
+    data = tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3)
+    keep = np.zeros(data.n_samples, bool)
+    keep[rows] = True
+    data = data.subset(keep)
+    return dataclasses.replace(data, **change)
+
+
 API = [
     ("design-two-wires", lambda: tz.Design(2, 20.0, 2.0), "n_wires must be at least 3"),
     ("design-float-wires", lambda: tz.Design(3.0, 20.0, 2.0), "n_wires must be an integer"),
@@ -345,6 +438,30 @@ API = [
     ("calibrate-workers", lambda: tz.calibrate(tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3),
                                                tz.Design(3, 20.0, 2.0), workers=-1),
      "workers must be a whole number, 0 or more, got -1"),
+    ("design-radius-over-half-length", lambda: tz.Design(3, 20.0, 50.0),
+     "pitch_radius 50 mm is more than half the length 20 mm"),
+    ("design-absurd-length", lambda: tz.Design(3, 1e308, 2.0), "length must be at most 1e+06 mm (a kilometre)"),
+    ("file-radius-over-half-length", _from_dict(pitch_radius_mm=50),
+     "pitch_radius_mm 50 mm is more than half the length_mm 20 mm"),
+    ("space-radius-over-half-length", lambda: tz.parse_space({"length_mm": [20, 40], "pitch_radius_mm": [1, 15]}),
+     "space key 'pitch_radius_mm': max 15 mm is more than half the min length_mm 20 mm"),
+    ("robot-routing-shares-a-hole", lambda: tz.Robot.from_dict({"segments": [
+        {"n_wires": 3, "length_mm": 40, "pitch_radius_mm": 3},
+        {"n_wires": 3, "length_mm": 30, "pitch_radius_mm": 3, "wire_angles_deg": [60, 180, 300],
+         "route_angles_deg": [[60], [120], [300]]}]}),
+     ("segment 1: its routing runs wire 2 of segment 1 through segment 0 in the hole of wire 2 of segment 0 "
+      "(120 deg, radius 3 mm)")),
+    ("metrics-theta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 60.0, 1.0, 0.4),
+     "theta_L = 60 is beyond +-pi: radians are expected (np.radians(60) = 1.0472)"),
+    ("metrics-delta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 1.0, 66.0, 0.4),
+     "delta = 66 is beyond +-2 pi: radians are expected (np.radians(66) = 1.15192)"),
+    ("measures-negative-dq", lambda: tz.pose_measures(tz.Design(3, 20.0, 2.0), 1.0, 0.5, -0.4),
+     "dq must be non-negative (a bound on each joint's error, mm), got -0.4"),
+    ("calibrate-tip-never-moves", lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
+     "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long"),
+    ("calibrate-validate-overlaps", lambda: tz.calibrate(_nominal(), tz.Design(3, 20.0, 2.0),
+                                                         validate=_nominal(rows=slice(20, 40))),
+     "20 of its 20 rows repeat rows of the training file nominal_3w.csv"),
     ("over-grid-mismatch", lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2),
                                                                    np.zeros(2), 0.4, np.ones(3)),
      "mask must have shape"),
@@ -361,3 +478,72 @@ def test_api_bad_input(call, needle):
 
 def test_the_api_table_is_large():
     assert len(API) >= 30 and len({c[0] for c in API}) == len(API)
+
+
+# ------------------------------------------------------------------------------------------------
+# The plausibility checks pass every shipped recording (and the lab's FTDCR v6 where it is at hand)
+# ------------------------------------------------------------------------------------------------
+V6 = "/work/shared/data/opencr_ftdcr_v6"
+RECORDINGS = [(tz.example_path(f"synthetic/{n}.csv"), tz.example_path(f"synthetic/{n}.design.json"), "model")
+              for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")]
+RECORDINGS += [(tz.example_path(f"ftdcr_v4/{n}.csv"), tz.example_path("ftdcr_v4/design.json"), "opencr")
+               for n in ("train", "tendon_pull")]
+RECORDINGS += [(f"{V6}/{n}.csv", f"{V6}/design.json", "opencr") for n in ("train", "tendon_pull")]
+
+
+@pytest.mark.parametrize("data, design, fmt", RECORDINGS, ids=lambda x: str(x).split("examples/")[-1])
+def test_shipped_recordings_are_plausible(data, design, fmt):
+    if not os.path.exists(data):
+        pytest.skip(f"{data} is not on this machine")
+    robot = tz.Robot.from_json(design)
+    tz.load_data(data, fmt, n_wires=robot.n_wires).check_against(robot)
+
+
+def test_the_shipped_validation_recording_is_a_separate_one():
+    from tension_zones.calibration._data import check_validation
+
+    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
+    train = tz.load_data(tz.example_path("ftdcr_v4/train.csv"), "opencr", n_wires=9)
+    val = tz.load_data(tz.example_path("ftdcr_v4/val.csv"), "opencr", n_wires=9, servo_ids=train.servo_ids)
+    val.check_against(robot)
+    check_validation(train, val)
+
+
+def test_a_figure_not_computed_is_null_not_zero(tmp_path):
+    """A deflection weight of 0 skips the statics: the worst deflection and the statics-infeasible
+    count are NaN in the result and null in result.json, never 0."""
+    from tension_zones._io import write_json
+    from tension_zones.design._optimise import evaluate_design
+
+    sc = tz.parse_scenario({**GOOD_SCENARIO, "n_wires": [4], "weights": {"deflection": 0.0}})
+    row = evaluate_design(sc, tz.Design(4, 20.0, 2.0))
+    assert np.isnan(row["worst_deflection_mm"]) and np.isnan(row["statics_infeasible_poses"])
+    assert np.isfinite(row["worst_position_uncertainty_mm"])
+    written = json.loads(write_json(tmp_path / "r.json", row).read_text())
+    assert written["worst_deflection_mm"] is None and written["statics_infeasible_poses"] is None
+
+
+def test_a_noise_floor_of_zero_does_not_divide():
+    """Noiseless data (repeated samples identical): the held-out error against a floor of 0 is finite."""
+    from tension_zones.calibration._loop import _excess
+
+    ex = _excess(0.1, 0.1, {"floor_mm": 0.0, "pairs": 10}, 50)
+    assert np.isfinite(ex["ratio_to_floor"]) and np.isfinite(ex["z"]) and ex["z"] > 0
+    assert np.isfinite(_excess(0.0, 0.0, {"floor_mm": 0.0, "pairs": 10}, 50)["z"])
+
+
+def test_a_space_with_every_field_fixed_is_one_design():
+    space = tz.parse_space({"n_wires": 3, "pitch_radius_mm": 2.0})
+    assert space.count(3) == 1 and space.columns(3)["pitch_radius_mm"].tolist() == [2.0]
+    assert np.asarray(space.batch(3).pitch_radius).tolist() == [2.0]
+
+
+def test_the_command_line_shows_a_warning_as_one_line(tmp_path, capsys, monkeypatch):
+    import warnings
+
+    from tension_zones import cli
+
+    monkeypatch.setattr(cli, "cmd_maps", lambda args: warnings.warn("first line\nsecond line", UserWarning, stacklevel=1))
+    assert main(["maps", "--wires", "3", "--out", str(tmp_path / "m.png")]) == 0
+    err = capsys.readouterr().err
+    assert err == "tension-zones: warning: first line second line\n", err

@@ -181,6 +181,7 @@ def test_bounds_are_linear_in_dq(theta_L, delta, dq, k, reduced):
 @given(st.floats(0.0, 1.5), st.floats(0.0, 2 * np.pi), st.floats(1.0, 100.0), st.floats(0.2, 10.0))
 def test_scaling_in_length_and_pitch_radius(theta_L, delta, L, r):
     """dp ~ L/r, dw ~ 1/r, sigma_v ~ L/r, sigma_w ~ 1/r, KCI scale-free."""
+    assume(r <= L / 2)  # a larger pitch radius is refused (Design: MAX_RADIUS_PER_LENGTH)
     d0 = tz.Design(3, 20.0, 2.0)
     a = _measures3(d0, theta_L, delta, 0.4, True)
     b = _measures3(d0.replace(length=L, pitch_radius=r), theta_L, delta, 0.4, True)

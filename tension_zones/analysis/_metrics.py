@@ -312,6 +312,25 @@ def _measures(Jx, blocks, a, b, dq, design):
     return out
 
 
+def _check_concrete_pose(theta_L, delta, dq) -> None:
+    """The NumPy edge of the public measures: concrete inputs in degrees, or a negative ``dq``, are a
+    ValueError (a bending angle beyond pi or a direction beyond 2 pi is not radians). Traced values
+    (``jit``, ``vmap``, sweeps) are not checked: NaN in, NaN out there."""
+    import math
+
+    for name, value, limit, what in (("theta_L", theta_L, math.pi, "pi"), ("delta", delta, 2 * math.pi, "2 pi")):
+        if isinstance(value, jax.core.Tracer):
+            continue
+        v = np.asarray(value, dtype=float)
+        big = np.isfinite(v) & (np.abs(v) > limit)
+        if np.any(big):
+            x = float(v[big].flat[0])
+            raise ValueError(f"{name} = {x:g} is beyond +-{what}: radians are expected "
+                             f"(np.radians({x:g}) = {math.radians(x):.6g})")
+    if not isinstance(dq, jax.core.Tracer) and np.any(np.asarray(dq, dtype=float) < 0):
+        raise ValueError(f"dq must be non-negative (a bound on each joint's error, mm), got {np.asarray(dq).tolist()}")
+
+
 # --------------------------------------------------------------------------------------------
 # Public single-pose measures
 # --------------------------------------------------------------------------------------------
@@ -333,6 +352,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
         ``dp_max`` (mm), ``dw_max`` (rad): the largest ``||dx[:3]||`` and ``||dx[3:]||`` with
         ``dx = J_xpsi pinv(J~_qpsi) dq_vec`` over the box (paper Eqs. 17-19), exact.
     """
+    _check_concrete_pose(theta_L, delta, dq)
     Jx, a, b, _ = _pose_inputs(design, theta_L, delta, dq)
     if mask is not None:
         mask = jnp.asarray(mask, Jx.dtype)
@@ -353,6 +373,7 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN
     in, NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
     """
+    _check_concrete_pose(theta_L, delta, dq)
     Jx, a, b, score = _pose_inputs(design, theta_L, delta, dq)  # shared by both modes
     mask = mask_from_score(wstack(score))
     bad = ~jnp.isfinite(theta_L + delta + _radius_or_nan(design, dq))  # cheap: no measure in it

@@ -367,7 +367,7 @@ def _output_shapes(fn, n_wires, dtype, arg_specs):
     """``{output: shape}`` of ``fn`` at one pose (traced once per function, wire count and argument
     shapes: tracing the kinematic measures takes 0.4 s, more than exploring a few designs)."""
     spec = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype),
-                                  Design(n_wires, 1.0, 1.0, dtype=dtype))
+                                  Design(n_wires, 2.0, 1.0, dtype=dtype))
     scalar = jax.ShapeDtypeStruct((), dtype)
     args = tuple(jax.ShapeDtypeStruct(shape, dt) for shape, dt in arg_specs)
     out = jax.eval_shape(lambda d, t, x, a: fn(d, t, x, *a), spec, scalar, scalar, args)

@@ -33,6 +33,22 @@ MAX_FORCE_N = 1e3
 #: More bad rows than this fraction (or a run of more than MAX_BAD_RUN) is not "isolated".
 MAX_BAD_FRACTION = 0.05
 MAX_BAD_RUN = 2
+#: Plausibility of a recording against its robot (:meth:`Dataset.check_against`), total length ``L``.
+#: The tip of an inextensible backbone stays within ``L`` of the base, so two tip positions are at
+#: most ``2 L`` apart; a spread above ``MAX_SPREAD_PER_LENGTH L`` (twice that: a marker beyond the
+#: tip, registration error) is not millimetres of this robot.
+MAX_SPREAD_PER_LENGTH = 4.0
+#: A tip that moves less than 1 % of ``L`` bends the robot by about 0.02 rad: nothing to calibrate
+#: on, and the signature of positions in metres (a thousandth of the millimetres).
+MIN_SPREAD_PER_LENGTH = 0.01
+#: A wire shortens by ``r theta`` in each segment it crosses (``r`` its pitch radius there,
+#: ``theta`` <= pi the segment's bend: a half turn, more than a continuum segment reaches); allowed:
+#: this many times ``pi sum r`` (wire stretch, slack taken up).
+MAX_WIRE_TRAVEL_FACTOR = 2.0
+#: Positions and commands compared to this many decimals (1 um) when looking for shared rows.
+SHARED_DECIMALS = 3
+#: A validation file sharing more than this fraction of its rows with the training file is refused.
+MAX_SHARED_FRACTION = 0.1
 _SERVO = re.compile(r"^servo_(\d+)_mm$")
 _TENDON = re.compile(r"tendon(\d+)_id(\d+)")
 
@@ -86,6 +102,56 @@ class Dataset:
         """(N,) True where a recording starts (path-dependent state restarts there)."""
         s = np.asarray(self.session)
         return np.concatenate([[True], s[1:] != s[:-1]])
+
+    def _label(self, i: int) -> str:
+        """Sample ``i`` as the file names it: its sample number, or its data row (OpenCR)."""
+        return f"row {self.sample[i]}" if self.frame == "tracker" else f"sample {self.sample[i]}"
+
+    def _wire_column(self, k: int) -> str:
+        return f"servo_{self.servo_ids[k]}_mm" if self.servo_ids is not None else f"q{k + 1}"
+
+    def check_against(self, robot) -> None:
+        """Refuse data that cannot be millimetres of ``robot`` (a :class:`~tension_zones.model.Robot`).
+
+        With ``L`` the robot's total length (see the module's constants for the arguments):
+
+        * the tip positions' spread (the largest side of their bounding box, from the 0.5th to the
+          99.5th percentile so that a few tracker glitches do not count) at least
+          ``MIN_SPREAD_PER_LENGTH L`` (a tip that never moves, or positions in metres) and at most
+          ``MAX_SPREAD_PER_LENGTH L`` (not the tip's distance from the base: a tracker far from the
+          base is a frame the calibration registers);
+        * every wire's commanded displacement at most ``MAX_WIRE_TRAVEL_FACTOR pi sum_j r_kj``, its
+          pitch radii summed over the segments it crosses (geometry allows ``pi sum_j r_kj``).
+
+        Raises:
+            DataError: one line with the numbers (file, column and sample for a wire).
+        """
+        name = Path(self.source).name or "the data"
+        L = float(np.sum(np.asarray(robot.lengths)))
+        cols = POS_COLS if self.frame == "base" else TIP_COLS
+        side = np.abs(np.percentile(self.p, 99.5, axis=0) - np.percentile(self.p, 0.5, axis=0))
+        a = int(np.argmax(side))
+        spread, lo, hi = float(side[a]), MIN_SPREAD_PER_LENGTH * L, MAX_SPREAD_PER_LENGTH * L
+        what = f"the tip positions span {spread:.3g} mm (column {cols[a]!r}, their widest) for a robot {L:g} mm long"
+        if spread < lo <= 1000 * spread <= hi:
+            raise DataError(f"{name}: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it: are the positions in "
+                            f"metres? Millimetres are expected ({1000 * spread:.3g} mm in millimetres)")
+        if spread < lo:
+            raise DataError(f"{name}: the tip never moves: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it "
+                            f"({lo:.3g} mm)")
+        if spread > hi:
+            raise DataError(f"{name}: {what}, but two tips of a robot that long are at most {2 * L:g} mm apart "
+                            f"(allowed {hi:g} mm): are the positions in millimetres?")
+        radii = np.where(robot.crosses, np.asarray(robot.route_radii), 0.0)
+        bound = MAX_WIRE_TRAVEL_FACTOR * math.pi * radii.sum(axis=1)
+        over = np.abs(self.q) > bound[None, :]
+        if np.any(over):
+            i, k = (int(x) for x in np.argwhere(over)[0])
+            n_seg = int(np.sum(robot.crosses[k]))
+            raise DataError(f"{name}: column {self._wire_column(k)!r}, {self._label(i)}: wire displacement "
+                            f"{self.q[i, k]:g} mm, but wire {k + 1} moves at most {bound[k]:.3g} mm ({MAX_WIRE_TRAVEL_FACTOR:g} "
+                            f"x pi x its pitch radii summed over the {n_seg} segment(s) it crosses, "
+                            f"{radii[k].sum():g} mm): are the commands in millimetres?")
 
     def split(self, holdout: float = 0.25):
         """Boolean masks ``(train, held_out)``: the split belongs to the data.
@@ -409,6 +475,29 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     return Dataset(sample=good.astype(np.int64) + 1, q=q, f=np.zeros((len(good), 3)), p=p, rot=None,
                    frame="tracker", groups=tuple(re.sub(r"_hold$", "", s) for s in labs),
                    timestamp=t[good], servo_ids=servo_ids, dropped=dropped, source=str(path))
+
+
+def shared_rows(train: Dataset, other: Dataset) -> int:
+    """How many samples of ``other`` repeat one of ``train`` (the same commands and the same tip position,
+    to :data:`SHARED_DECIMALS` decimals): independent recordings share none."""
+    def rows(d):
+        return np.round(np.concatenate([d.q, d.p], axis=1), SHARED_DECIMALS)
+
+    if other.n_wires != train.n_wires:
+        return 0
+    seen = {r.tobytes() for r in rows(train) + 0.0}  # + 0.0: -0.0 and 0.0 alike
+    return sum(r.tobytes() in seen for r in rows(other) + 0.0)
+
+
+def check_validation(train: Dataset, validate: Dataset) -> None:
+    """Refuse a validation recording that shares more than :data:`MAX_SHARED_FRACTION` of its samples
+    with the training one (:func:`shared_rows`): predicting it would not validate anything."""
+    k = shared_rows(train, validate)
+    if k > MAX_SHARED_FRACTION * validate.n_samples:
+        same = "; the same recording" if k == validate.n_samples == train.n_samples else ""
+        raise DataError(f"validation file {Path(validate.source).name}: {k} of its {validate.n_samples} rows repeat "
+                        f"rows of the training file {Path(train.source).name} (same commands and tip positions"
+                        f"{same}); a validation must be a separate recording")
 
 
 #: ``--format`` -> reader. A reader takes ``(path, n_wires=, drop_bad=)`` (and may take more keywords).

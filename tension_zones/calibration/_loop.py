@@ -71,7 +71,7 @@ import numpy as np
 from ..model import Design, Robot
 from ._baselines import baselines
 from ._caveats import bound_lines, caveats, knife_edges
-from ._data import Dataset, pattern_family
+from ._data import Dataset, check_validation, pattern_family
 from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_test, structure_test
 from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
@@ -232,13 +232,19 @@ def rmse_aligned(r) -> float:
     return rmse(r - r.mean(axis=0))
 
 
+#: A length below any tracker's resolution (mm): stands for a noise floor or error of exactly 0.
+TINY_MM = 1e-9
+
+
 def _excess(plain: float, err: float, noise: dict, m: int) -> dict:
     """The held-out error (plain RMSE ``plain``, the decisions' ``err``; ``m`` samples) against the noise
     floor: their ratio, and the mean square's log-ratio as an F-type z-value, since the floor is itself
-    estimated (from ``noise["pairs"]`` pairs of three axes) and can be off by chance."""
-    log_ratio = math.log(err**2 / (noise["floor_mm"] ** 2))
+    estimated (from ``noise["pairs"]`` pairs of three axes) and can be off by chance. A floor (or error)
+    of 0, noiseless data, counts as :data:`TINY_MM`: finite figures, far above the floor."""
+    floor = max(noise["floor_mm"], TINY_MM)
+    log_ratio = math.log(max(err, TINY_MM) ** 2 / (floor**2))
     sd = math.sqrt(2.0 / (3 * m) + 2.0 / (3 * max(noise["pairs"], 1)))
-    return {"ratio_to_floor": plain / noise["floor_mm"], "z": log_ratio / sd}
+    return {"ratio_to_floor": plain / floor, "z": log_ratio / sd}
 
 
 def _flagged(structure: dict) -> bool:
@@ -267,6 +273,10 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     t0 = time.perf_counter()
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
+    for d in (data,) if validate is None else (data, validate):
+        d.check_against(robot)
+    if validate is not None:
+        check_validation(data, validate)
     n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
                              * robot.n_segments)
     library = default_library(data.frame) if library is None else tuple(library)

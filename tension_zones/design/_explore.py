@@ -23,7 +23,7 @@ import numpy as np
 
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
-from ..model._design import Design
+from ..model._design import Design, read_json
 from ..model._statics import as_wrench, compliance_pose
 from ._space import Space
 
@@ -150,10 +150,7 @@ class _Store:
         if self.out.exists() and not self.out.is_dir():
             raise ValueError(f"the output folder {str(self.out)!r} is a file")
         if self.manifest_path.exists():
-            try:
-                self.manifest = json.loads(self.manifest_path.read_text())
-            except json.JSONDecodeError as e:
-                raise ValueError(f"{str(self.manifest_path)!r} is not valid JSON: {e}") from None
+            self.manifest = read_json(self.manifest_path, "exploration manifest")
             old = {k: self.manifest.get(k) for k in ident}
             if old != ident:
                 key = _first_difference(old["space"] or {}, ident["space"]) if old["format"] == FORMAT else None

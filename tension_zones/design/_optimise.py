@@ -423,6 +423,10 @@ def _initial(key, S: int, n: int, n_gaps: int) -> dict:
 
 
 def _result_row(sc: Scenario, n, d: Design, exact, pieces) -> dict[str, Any]:
+    """One wire count's result. With a deflection weight of 0 the statics are never computed: their
+    figures are NaN (``null`` in ``result.json``), not 0, and feasibility is controllability alone."""
+    statics = sc.w_deflection > 0
+    infeasible = int(pieces["statics_infeasible"]) if statics else math.nan
     return {
         "n_wires": n,
         "pitch_radius_mm": float(d.pitch_radius),
@@ -430,12 +434,12 @@ def _result_row(sc: Scenario, n, d: Design, exact, pieces) -> dict[str, Any]:
         "wire_angles_deg": [float(a) for a in np.mod(np.degrees(np.asarray(d.wire_angles)), 360.0)],
         "objective": float(exact),
         "worst_position_uncertainty_mm": float(pieces["worst_dp"]),
-        "worst_deflection_mm": float(pieces["worst_defl"]),
+        "worst_deflection_mm": float(pieces["worst_defl"]) if statics else math.nan,
         "min_spread": float(pieces["min_spread"]),
         "spread_violations": int(pieces["violations"]),
         "zero_width_directions_deg": zero_width_directions(sc, d),
-        "statics_infeasible_poses": int(pieces["statics_infeasible"]),
-        "feasible": bool(int(pieces["violations"]) == 0 and int(pieces["statics_infeasible"]) == 0),
+        "statics_infeasible_poses": infeasible,
+        "feasible": bool(int(pieces["violations"]) == 0 and (not statics or infeasible == 0)),
     }
 
 
@@ -496,18 +500,17 @@ OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
 
 
 def write_outputs(result: dict[str, Any], out_dir) -> list:
-    """``result.json`` (without the history), ``tradeoff.png`` and ``convergence.png``; each file
-    appears complete or not at all (:func:`tension_zones._io.atomic_path`)."""
-    import json
+    """``result.json`` (without the history; figures not computed are ``null``), ``tradeoff.png`` and
+    ``convergence.png``; each file appears complete or not at all (:func:`tension_zones._io.atomic_path`)."""
     from pathlib import Path
 
-    from .._io import atomic_path, write_text
+    from .._io import atomic_path, write_json
     from ..plots import plot_convergence, plot_tradeoff
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / name for name in OUTPUT_FILES]
-    write_text(paths[0], json.dumps({k: v for k, v in result.items() if k != "history"}, indent=2))
+    write_json(paths[0], {k: v for k, v in result.items() if k != "history"})
     with atomic_path(paths[1]) as tmp:
         plot_tradeoff(result, tmp)
     with atomic_path(paths[2]) as tmp:

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from ..model._design import DEFAULT_BACKBONE_EI, read_json
+from ..model._design import DEFAULT_BACKBONE_EI, _check_radius, read_json
 
 #: Every scenario key, its default and its meaning (design/README.md's table lists them, tested).
 DEFAULTS: dict[str, Any] = {
@@ -149,6 +149,8 @@ def _grid(key, v, lo, hi, kind="scenario"):
         raise _err(key, f"min {a} is larger than max {b}", kind)
     if a < lo or b > hi:
         raise _err(key, f"must lie within [{lo}, {hi}] deg, got [{a}, {b}]", kind)
+    if a < b and s > b - a:
+        raise _err(key, f"step {s:g} is larger than the range {a:g}..{b:g}: the grid would be {a:g} alone", kind)
     n = int(math.floor((b - a) / s + 1e-9)) + 1
     if n > 100_000:
         raise _err(key, f"grid of {n} values is too fine", kind)
@@ -205,7 +207,8 @@ def parse_scenario(d: dict) -> Scenario:
             raise _err(k, f"must be true or false, got {s[k]!r}")
     for k in ("starts", "steps", "seed"):
         if isinstance(o[k], bool) or not isinstance(o[k], int) or o[k] < (0 if k == "seed" else 1):
-            raise _err(f"optimizer.{k}", f"must be a positive integer, got {o[k]!r}")
+            kind = "a non-negative" if k == "seed" else "a positive"
+            raise _err(f"optimizer.{k}", f"must be {kind} integer, got {o[k]!r}")
     load = s["load_N"]
     if not isinstance(load, (list, tuple)) or len(load) != 3:
         raise _err("load_N", f"must be [fx, fy, fz], got {load!r}")
@@ -239,6 +242,10 @@ def parse_scenario(d: dict) -> Scenario:
         seed=o["seed"],
         raw=s,
     )
+    try:
+        _check_radius(scen.length, scen.pitch_radius[1], names=("max", "length_mm"))
+    except ValueError as e:
+        raise _err("pitch_radius_mm", str(e)) from None
     if all(scen.r_bounds(n)[0] > scen.r_bounds(n)[1] for n in scen.n_wires):
         n = scen.n_wires[0]
         lo, hi = scen.r_bounds(n)

@@ -26,6 +26,7 @@ from ..model._design import (
     DEFAULT_BACKBONE_EI,
     DEFAULT_WIRE_STIFFNESS,
     Design,
+    _check_radius,
     read_json,
 )
 from ._scenario import _err, _grid, _merge, _num, _wire_counts
@@ -112,7 +113,9 @@ class Space:
         return dims + ([(f"{OFFSET}_{k + 1}", kind, v) for k in range(n)] if kind != "fixed" else [])
 
     def count(self, n: int) -> int:
-        """Designs sampled for ``n`` wires."""
+        """Designs sampled for ``n`` wires (one where every field is fixed)."""
+        if not self._dims(n):
+            return 1
         if self.method == "halton":
             return self.designs
         return math.prod(self.points if kind == "range" else len(v) for _, kind, v in self._dims(n))
@@ -120,6 +123,8 @@ class Space:
     def _samples(self, n: int) -> dict[str, np.ndarray]:
         """Each sampled dimension's values over the designs for ``n`` wires, (N,)."""
         dims = self._dims(n)
+        if not dims:  # every field fixed: one design
+            return {}
         if self.method == "halton":
             u = halton(self.designs, len(dims))
             return {key: (v[0] + u[:, j] * (v[1] - v[0]) if kind == "range"
@@ -155,7 +160,7 @@ class Space:
         cols = self.columns(n)
         leaves = {field: np.asarray(cols[key], float) for key, (field, _, _) in FIELDS.items()}
         leaves["wire_angles"] = np.radians(np.stack([cols[f"wire_angle_{k + 1}_deg"] for k in range(n)], 1))
-        template = jax.tree_util.tree_structure(Design(n, 1.0, 1.0))
+        template = jax.tree_util.tree_structure(Design(n, 2.0, 1.0))
         return jax.tree_util.tree_unflatten(template, [leaves[f] for f in _DATA_FIELDS])
 
 
@@ -251,6 +256,10 @@ def parse_space(d: dict) -> Space:
     if kind != "fixed" and max(v) - min(v) >= 360.0 / max(counts):
         raise _err(OFFSET, f"spans {max(v) - min(v):g} deg, must stay below 360/n = "
                            f"{360.0 / max(counts):g} deg for {max(counts)} wires (wires would meet)", KIND)
+    try:  # the largest radius against the shortest length: every design of the space is valid
+        _check_radius(min(fields["length_mm"][1]), max(fields["pitch_radius_mm"][1]), names=("max", "min length_mm"))
+    except ValueError as e:
+        raise _err("pitch_radius_mm", str(e), KIND) from None
     method, points, designs = _sample(d.get("sample", {}))
     load = raw["load_N"]
     if load is not None:

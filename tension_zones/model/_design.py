@@ -25,6 +25,14 @@ DEFAULT_BACKBONE_EI = 1200.0
 DEFAULT_WIRE_STIFFNESS = 75.0
 
 _SCALARS = ("length", "pitch_radius", "wire_stiffness", "backbone_EI", "preload")
+#: The largest length and pitch radius taken (mm): a kilometre is beyond any continuum robot, and far
+#: larger values overflow the measures' squares and products into meaningless numbers.
+MAX_SIZE_MM = 1e6
+#: The largest pitch radius, as a fraction of the length. Bent by ``theta``, a segment's centre of
+#: curvature is ``L / theta`` from its backbone; a wire on the inside stays short of it only while
+#: ``r < L / theta``, so ``r <= L / 2`` leaves bends up to 2 rad (115 deg), past the 90 deg of the
+#: workspace grids.
+MAX_RADIUS_PER_LENGTH = 0.5
 _DATA_FIELDS = ("length", "pitch_radius", "wire_angles", "wire_stiffness", "backbone_EI", "preload")
 
 
@@ -96,6 +104,7 @@ class Design:
         values["wire_angles"] = wire_angles
         for name in _SCALARS:
             _check_scalar(name, values[name])
+        _check_radius(values["length"], values["pitch_radius"])
         _check_angles(values["wire_angles"], n_wires)
         object.__setattr__(self, "n_wires", n_wires)
         for name in _DATA_FIELDS:
@@ -192,6 +201,7 @@ class Design:
         if angles is not None:
             _check_angles(angles, kw["n_wires"], field="wire_angles_deg")
             kw["wire_angles"] = np.radians(np.asarray(angles, dtype=float))
+        _check_radius(d["length_mm"], d["pitch_radius_mm"], names=("pitch_radius_mm", "length_mm"))
         design = cls(**kw)
         missing = missing_physical_keys(d) if warn_missing else []
         if missing:
@@ -251,20 +261,83 @@ def missing_physical_keys(d: dict[str, Any]) -> list[str]:
     return [k for k in PHYSICAL_KEYS if k not in d]
 
 
+#: Deepest nesting a JSON input may have: a robot design file needs four levels; deeper is not an
+#: input of this package (and would otherwise exhaust the parser's recursion).
+MAX_JSON_DEPTH = 32
+
+
+class _BadJSON(ValueError):
+    """A JSON text that parses but is refused (duplicate key, non-finite number)."""
+
+
+class _NonFinite:
+    """Stands for a ``NaN``/``Infinity`` literal (or a number that overflows) until its key is known."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+
+def _unique_keys(pairs):
+    seen = {}
+    for k, v in pairs:
+        if k in seen:
+            raise _BadJSON(f"key {k!r} appears twice (JSON keys must be unique)")
+        seen[k] = v
+    return seen
+
+
+def _finite_float(text: str):
+    v = float(text)
+    return v if math.isfinite(v) else _NonFinite(f"{text} (too large for a float)")
+
+
+def _finite_int(text: str):
+    if len(text.lstrip("-")) > 308:  # beyond any float (and Python's digit limit for int())
+        return _NonFinite(f"{text[:12]}... (too large for a float)")
+    return int(text)
+
+
+def _check_tree(value, where: str = "", depth: int = 1) -> None:
+    """Refuse nesting deeper than :data:`MAX_JSON_DEPTH` and the non-finite stand-ins, naming the key."""
+    if isinstance(value, _NonFinite):
+        raise _BadJSON(f"key {where or '(top level)'!r} is {value.text}; only finite numbers are allowed")
+    if not isinstance(value, (dict, list)):
+        return
+    if depth > MAX_JSON_DEPTH:
+        raise _BadJSON(f"nests deeper than {MAX_JSON_DEPTH} levels (at key {where!r})")
+    items = value.items() if isinstance(value, dict) else enumerate(value)
+    for k, v in items:
+        _check_tree(v, f"{where}[{k}]" if isinstance(k, int) else f"{where}.{k}" if where else k, depth + 1)
+
+
 def read_json(path, what: str):
-    """A JSON file's content; a missing, unreadable or malformed file is a ValueError naming it
-    (``what``). A UTF-8 byte-order mark is allowed."""
+    """A JSON file's content, strictly: every user-written JSON file is read here.
+
+    A missing, unreadable or malformed file, a key that appears twice in an object, a ``NaN`` or
+    ``Infinity`` literal (or a number too large for a float) and nesting deeper than
+    :data:`MAX_JSON_DEPTH` levels are one-line ValueErrors naming the file (``what``) and the key.
+    A UTF-8 byte-order mark is allowed.
+    """
     path = Path(path)
+    name = f"{what} {str(path)!r}"
     try:
-        return json.loads(path.read_text(encoding="utf-8-sig"))
+        text = path.read_text(encoding="utf-8-sig")
+        value = json.loads(text, object_pairs_hook=_unique_keys, parse_constant=_NonFinite,
+                           parse_float=_finite_float, parse_int=_finite_int)
+        _check_tree(value)
+        return value
     except FileNotFoundError:
-        raise ValueError(f"{what} {str(path)!r} does not exist") from None
+        raise ValueError(f"{name} does not exist") from None
     except IsADirectoryError:
-        raise ValueError(f"{what} {str(path)!r} is a folder, not a file") from None
+        raise ValueError(f"{name} is a folder, not a file") from None
     except UnicodeDecodeError as e:
-        raise ValueError(f"{what} {str(path)!r} is not UTF-8 text (byte {e.start})") from None
+        raise ValueError(f"{name} is not UTF-8 text (byte {e.start})") from None
     except json.JSONDecodeError as e:
-        raise ValueError(f"{what} {str(path)!r} is not valid JSON: {e}") from None
+        raise ValueError(f"{name} is not valid JSON: {e}") from None
+    except _BadJSON as e:
+        raise ValueError(f"{name}: {e}") from None
+    except RecursionError:
+        raise ValueError(f"{name}: nests deeper than {MAX_JSON_DEPTH} levels") from None
 
 
 def _what(value) -> str:
@@ -312,8 +385,20 @@ def _check_scalar(name: str, value, field: str | None = None) -> None:
         raise ValueError(f"{name} must be finite, got {v}")
     if field in ("length", "pitch_radius", "wire_stiffness") and v <= 0:
         raise ValueError(f"{name} must be positive, got {v}")
+    if field in ("length", "pitch_radius") and v > MAX_SIZE_MM:
+        raise ValueError(f"{name} must be at most {MAX_SIZE_MM:g} mm (a kilometre), got {v:g}")
     if field in ("backbone_EI", "preload") and v < 0:
         raise ValueError(f"{name} must be non-negative, got {v}")
+
+
+def _check_radius(length, pitch_radius, names=("pitch_radius", "length")) -> None:
+    """The pitch radius at most :data:`MAX_RADIUS_PER_LENGTH` of the length (concrete values only)."""
+    if not (_is_concrete(length) and _is_concrete(pitch_radius)):
+        return
+    r, L = float(np.asarray(pitch_radius)), float(np.asarray(length))
+    if r > MAX_RADIUS_PER_LENGTH * L:
+        raise ValueError(f"{names[0]} {r:g} mm is more than half the {names[1]} {L:g} mm: a wire that far out meets "
+                         f"the centre of curvature before the segment bends {1 / MAX_RADIUS_PER_LENGTH:g} rad")
 
 
 def _check_angles(angles, n_wires: int, field: str = "wire_angles") -> None:

@@ -403,12 +403,15 @@ class Robot:
         if not any(routes):
             return robot
         ra, rr = np.array(robot.route_angles), np.array(robot.route_radii)
+        given = np.zeros(ra.shape, bool)
         k0 = 0
         for j, (seg, route) in enumerate(zip(designs, routes)):
             for key, arr, scale in (("route_angles_deg", ra, np.pi / 180), ("route_radii_mm", rr, 1.0)):
                 if key in route:
                     arr[k0:k0 + seg.n_wires, :j] = _routing_entry(route[key], j, seg.n_wires, key) * scale
+                    given[k0:k0 + seg.n_wires, :j] = True
             k0 += seg.n_wires
+        _check_holes(robot, ra, rr, given)
         return cls(designs, route_angles=ra, route_radii=rr)
 
     @classmethod
@@ -464,8 +467,32 @@ def _warn_missing(designs, dicts) -> None:
         warnings.warn("design leaves out " + "; ".join(parts), MissingDesignKeyWarning, stacklevel=3)
 
 
+def _check_holes(robot: Robot, ra, rr, given) -> None:
+    """Refuse a routed wire that shares another wire's hole: two wires crossing a segment at the same
+    angle and pitch radius there, one of them routed by the file (the default routing is left as
+    the file's author chose it)."""
+    owner, n_of = robot.owner, robot.n_wires_per_segment
+    first = np.concatenate([[0], np.cumsum(n_of)])
+    for j in range(robot.n_segments):
+        ks = np.flatnonzero(robot.crosses[:, j])
+        for a, k in enumerate(ks):
+            for m in ks[a + 1:]:
+                if not (given[k, j] or given[m, j]):
+                    continue
+                gap = abs((ra[k, j] - ra[m, j] + np.pi) % (2 * np.pi) - np.pi)
+                if gap <= 1e-9 and abs(rr[k, j] - rr[m, j]) <= 1e-9 * max(rr[k, j], 1.0):
+                    w, o = (m, k) if given[m, j] else (k, m)
+                    wire, other = (f"wire {x - first[owner[x]] + 1} of segment {owner[x]}" for x in (w, o))
+                    raise ValueError(f"segment {owner[w]}: its routing runs {wire} through segment {j} in the "
+                                     f"hole of {other} ({np.degrees(ra[o, j]):g} deg, radius {rr[o, j]:g} mm); "
+                                     "each wire needs its own hole")
+
+
 def _routing_entry(value, j: int, n: int, key: str) -> np.ndarray:
     """A segment's ``route_*`` entry as an (n, j) array, or a one-line error naming the key."""
+    if j == 0:
+        raise ValueError(f"segment 0: {key} has no place on the first segment (it gives a wire's path through the "
+                         "segments before its own, and none lies before segment 0)")
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
