@@ -26,9 +26,10 @@ def knife_edges(rounds: list) -> list[dict]:
     ``other_side_rmse_mm`` is the held-out RMSE the other decision would have given (at that round)."""
     out = []
     for rd in rounds:
+        best = min((t["rmse_held_out_mm"] for t in rd["tried"] if t["accepted"]), default=np.inf)
         for t in rd["tried"]:
-            if t["significant"] and not t["accepted"]:
-                continue  # another refit was kept: crossing this one's edge changes nothing
+            if not t["accepted"] and (t["significant"] or t["rmse_held_out_mm"] >= best):
+                continue  # a better refit was kept: crossing this one's edge changes nothing
             kept = bool(t["accepted"])
             other = rd["rmse_held_out_mm"] if kept else t["rmse_held_out_mm"]
             tests = [("held-out drop", t["sse_drop"], t["needed"]),
