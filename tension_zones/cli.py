@@ -436,8 +436,8 @@ def _add_calibrate_parser(sub) -> None:
     c.add_argument("--force", action="store_true", help="replace an existing report in --out")
     c.add_argument("--workers", type=int, default=None,
                    help="processes running the loop's independent fits alongside this one (default: one per "
-                        "spare core, at most 4, for 1024 samples x segments or more; 0: none); the report is "
-                        "the same with any")
+                        "spare core, at most 4, for 1024 samples x segments or more; 0: none; a count asked for "
+                        "is capped at one per spare core); the report is the same with any")
     c.add_argument("--quiet", action="store_true", help="only the one-line summary")
     c.set_defaults(func=cmd_calibrate)
 

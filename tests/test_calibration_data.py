@@ -280,3 +280,42 @@ def test_home_memory_tells_memory_from_drift():
     assert h["time_unit"] == "sample" and abs(h["drift_mm"][0] - 0.05 * 1.5 / 60.0) < 2e-4
     with pytest.raises(ValueError, match="home samples"):
         home_memory(dataclasses.replace(data, q=q + 5.0))
+
+
+@pytest.mark.parametrize("value", ["99999", "1e308", "-4000"])
+def test_a_tracker_glitch_is_dropped_and_listed(good, tmp_path, value):
+    """One tracker glitch (an absurd position while the commands move smoothly) is found before any fit,
+    against the recording's own median second difference, dropped and listed; nothing else is."""
+    lines, _ = good
+    data = read_csv(write(tmp_path, edit(lines, 30, "py", value)))
+    assert data.n_samples == len(lines) - 2
+    (d,) = data.dropped
+    assert d["row"] == 30 and d["column"] == "py" and d["reason"].startswith("tracker glitch")
+    assert read_csv(write(tmp_path, lines)).dropped == ()
+
+
+def test_the_shipped_recordings_have_no_glitch():
+    """The detector leaves every shipped recording whole: motion reversals and jumps between patterns
+    are not glitches."""
+    import tension_zones as tz
+
+    train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=9)
+    sets = [train, read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=9, servo_ids=train.servo_ids)]
+    sets += [read_opencr(tz.example_path(f"ftdcr_v{v}/{f}.csv"), n_wires=9) for v in (4, 6)
+             for f in ("tendon_pull",)] + [read_opencr(tz.example_path("ftdcr_v6/train.csv"), n_wires=9)]
+    sets += [read_csv(tz.example_path(f"synthetic/{n}.csv")) for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")]
+    assert all(s.dropped == () for s in sets)
+
+
+def test_a_glitch_leaves_the_calibration_as_it_was(tmp_path):
+    """The same recording with one glitch names the same effect, to the same error."""
+    import tension_zones as tz
+    from tension_zones.calibration import calibrate
+
+    design = tz.Design.from_json(tz.example_path("synthetic/unknown_a_3w.design.json"))
+    lines = tz.example_path("synthetic/unknown_a_3w.csv").read_text().splitlines()
+    clean = calibrate(read_csv(write(tmp_path, lines)), design).to_json()
+    bad = read_csv(write(tmp_path, edit(lines, 200, "px", "99999")))
+    got = calibrate(bad, design).to_json()
+    assert [e["name"] for e in got["effects"]] == [e["name"] for e in clean["effects"]] == ["backlash"]
+    assert got["dropped_rows"] == 1 and abs(got["rmse_after_mm"] - clean["rmse_after_mm"]) < 0.01

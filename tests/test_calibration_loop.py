@@ -202,8 +202,11 @@ def test_worker_count(monkeypatch):
 
     from tension_zones.calibration._fits import MAX_WORKERS, MIN_WORK, worker_count
 
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    cap = max(cores - 1, 1)  # a count asked for is capped at one per spare core
     monkeypatch.setenv("TENSION_ZONES_WORKERS", "2")
-    assert worker_count() == 2 and worker_count(0) == 0 and worker_count(3, work=1) == 3
+    assert worker_count() == min(2, cap) and worker_count(0) == 0 and worker_count(3, work=1) == min(3, cap)
+    assert worker_count(1000) == cap and worker_count(1) == 1
     monkeypatch.setenv("TENSION_ZONES_WORKERS", "two")
     with pytest.raises(ValueError, match="TENSION_ZONES_WORKERS must be a whole number"):
         worker_count()
@@ -214,6 +217,5 @@ def test_worker_count(monkeypatch):
     monkeypatch.setattr(sys, "argv", ["/somewhere/script.py"])
     assert worker_count(None, 10 * MIN_WORK) == 0  # a plain script
     monkeypatch.delattr(main_module, "__file__")  # interactive, a notebook, python -c
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     assert worker_count(None, 10 * MIN_WORK) == max(0, min(cores - 1, MAX_WORKERS))
     assert worker_count(None, MIN_WORK - 1) == 0  # too small to win a worker's start back

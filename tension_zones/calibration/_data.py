@@ -33,6 +33,16 @@ MAX_FORCE_N = 1e3
 #: More bad rows than this fraction (or a run of more than MAX_BAD_RUN) is not "isolated".
 MAX_BAD_FRACTION = 0.05
 MAX_BAD_RUN = 2
+#: A tracker glitch: a sample whose position jumps away from both neighbours while they agree and its
+#: commands do not. Its second difference (the sample against its neighbours' midpoint) exceeds
+#: ``GLITCH_MEDIANS`` times the recording's median one and ``GLITCH_NEIGHBOURS`` times the neighbours'
+#: own distance (so a jump to a new pattern is not one), while its commands' second difference is at
+#: most their neighbours' distance over ``GLITCH_NEIGHBOURS`` (so a reversal of the motion is not one). For noise alone the second difference is a 3-D
+#: chi of sigma sqrt(3/2): 20 medians is about 31 sigma, beyond any chance. Isolated only: where more
+#: than ``GLITCH_SHARE`` of the samples qualify, it is the recording's motion, and nothing is dropped.
+GLITCH_MEDIANS = 20.0
+GLITCH_NEIGHBOURS = 3.0
+GLITCH_SHARE = 0.02
 #: Plausibility of a recording against its robot (:meth:`Dataset.check_against`), total length ``L``.
 #: The tip of an inextensible backbone stays within ``L`` of the base, so two tip positions are at
 #: most ``2 L`` apart; a spread above ``MAX_SPREAD_PER_LENGTH L`` (twice that: a marker beyond the
@@ -302,6 +312,43 @@ def _resolve_bad(name: str, bad: dict, n: int, drop_bad: bool, sample_of) -> tup
     return tuple({"row": i + 1, "column": bad[i][0], "reason": bad[i][1]} for i in rows)
 
 
+def _second_difference(x):
+    """Each interior sample's distance from its neighbours' midpoint, and the neighbours' distance."""
+    return (np.linalg.norm(x[1:-1] - (x[:-2] + x[2:]) / 2.0, axis=1), np.linalg.norm(x[2:] - x[:-2], axis=1))
+
+
+def glitches(p, q, cols) -> dict:
+    """Tracker glitches in positions ``p`` (N, 3) commanded by ``q`` (N, n), in acquisition order (see
+    ``GLITCH_MEDIANS``): ``{index: (column, reason)}`` with ``cols`` the position columns' names."""
+    p, q = np.asarray(p, float), np.asarray(q, float)
+    if len(p) < 5:
+        return {}
+    with np.errstate(over="ignore", invalid="ignore"):
+        dev = p[1:-1] - (p[:-2] + p[2:]) / 2.0
+        size, span = _second_difference(p)
+        q_size, q_span = _second_difference(q)
+        scale = float(np.median(size[np.isfinite(size)])) if np.isfinite(size).any() else 0.0
+        hit = ((size > GLITCH_MEDIANS * max(scale, 1e-12)) & (size > GLITCH_NEIGHBOURS * span)
+               & (GLITCH_NEIGHBOURS * q_size <= q_span))
+    idx = np.flatnonzero(hit)
+    if len(idx) > max(1, GLITCH_SHARE * len(p)):
+        return {}
+    out = {}
+    for k in idx:
+        c = int(np.argmax(np.abs(np.nan_to_num(dev[k], posinf=np.inf))))
+        out[int(k) + 1] = (cols[c], f"tracker glitch: {size[k]:.4g} mm from its neighbours' midpoint, "
+                                    f"{size[k] / max(scale, 1e-12):.3g} times the recording's median")
+    return out
+
+
+def _drop_glitches(good, p, q, cols, row_of) -> tuple[np.ndarray, tuple]:
+    """``good`` (K,) row indices without the rows whose positions ``p`` (K, 3) are glitches (commands
+    ``q``), and their ``dropped`` entries (``row_of(i)``: the entry's row and sample for row index ``i``)."""
+    found = glitches(p, q, cols)
+    entries = tuple({**row_of(good[k]), "column": c, "reason": why} for k, (c, why) in found.items())
+    return np.delete(good, list(found)), entries
+
+
 def _fmt(x) -> str:
     return f"{x:g}" if np.isfinite(x) else str(x)
 
@@ -386,9 +433,13 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
         i = good[back[0] + 1]
         raise DataError(f"{name}: column 'sample', row {i + 1}: samples must be in acquisition order "
                         f"(increasing), got {_fmt(sample[i])} after {_fmt(sample[good[back[0]]])}")
-    stack = lambda cs: np.stack([cols[c][good] for c in cs], axis=1)  # noqa: E731
     for d in dropped:
         d["sample"] = _fmt(sample[d["row"] - 1])
+    good, more = _drop_glitches(good, np.stack([cols[c][good] for c in POS_COLS], axis=1),
+                                np.stack([cols[c][good] for c in qcols], axis=1), POS_COLS,
+                                lambda i: {"row": int(i) + 1, "sample": _fmt(sample[i])})
+    dropped = tuple(dropped) + more
+    stack = lambda cs: np.stack([cols[c][good] for c in cs], axis=1)  # noqa: E731
     return Dataset(sample=sample[good].astype(np.int64), q=stack(qcols), f=stack(FORCE_COLS), p=stack(POS_COLS),
                    rot=stack(ROT_COLS), frame="base", dropped=dropped, source=str(path))
 
@@ -469,6 +520,10 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     for d in dropped:
         d["sample"] = str(d["row"])
     good = np.flatnonzero(~np.isin(np.arange(len(body)), list(bad)))
+    good, more = _drop_glitches(good, np.stack([cols[c][good] for c in TIP_COLS], axis=1),
+                                np.stack([cols[c][good] for c in scols], axis=1), TIP_COLS,
+                                lambda i: {"row": int(i) + 1, "sample": str(int(i) + 1)})
+    dropped = tuple(dropped) + more
     q = -np.stack([cols[c][good] for c in scols], axis=1)
     p = np.stack([cols[c][good] for c in TIP_COLS], axis=1)
     labs = tuple(labels[i] for i in good)

@@ -197,16 +197,18 @@ def worker_count(workers=None, work: int | None = None) -> int:
     """The number of worker processes: ``workers`` (checked), or for None ``TENSION_ZONES_WORKERS`` if
     set, else one per core beyond the first (at most ``MAX_WORKERS``) where starting them is safe (see
     the module) and the problem is large enough (``work``, its samples x segments, at least
-    ``MIN_WORK``), else 0."""
+    ``MIN_WORK``), else 0. A count asked for is capped at one per core beyond the first (at least
+    one): a fit runs on about one core, so more only share the cores, each with its own programs."""
+    cap = max(_cores() - 1, 1)
     if workers is not None:
         if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
             raise ValueError(f"workers must be a whole number, 0 or more, got {workers!r}")
-        return int(workers)
+        return min(int(workers), cap)
     env = os.environ.get("TENSION_ZONES_WORKERS", "").strip()
     if env:
         if not env.isdigit():
             raise ValueError(f"TENSION_ZONES_WORKERS must be a whole number, 0 or more, got {env!r}")
-        return int(env)
+        return min(int(env), cap)
     if work is not None and work < MIN_WORK:
         return 0
     main = sys.modules.get("__main__")
