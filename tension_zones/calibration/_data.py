@@ -336,8 +336,9 @@ def glitches(p, q, cols) -> dict:
     out = {}
     for k in idx:
         c = int(np.argmax(np.abs(np.nan_to_num(dev[k], posinf=np.inf))))
-        out[int(k) + 1] = (cols[c], f"tracker glitch: {size[k]:.4g} mm from its neighbours' midpoint, "
-                                    f"{size[k] / max(scale, 1e-12):.3g} times the recording's median")
+        why = (f"tracker glitch: {size[k]:.4g} mm from its neighbours' midpoint, "
+               f"{size[k] / max(scale, 1e-12):.3g} times the recording's median")
+        out[int(k) + 1] = (cols[c], why)
     return out
 
 
