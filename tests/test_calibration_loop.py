@@ -219,3 +219,24 @@ def test_worker_count(monkeypatch):
     monkeypatch.delattr(main_module, "__file__")  # interactive, a notebook, python -c
     assert worker_count(None, 10 * MIN_WORK) == max(0, min(cores - 1, MAX_WORKERS))
     assert worker_count(None, MIN_WORK - 1) == 0  # too small to win a worker's start back
+
+
+def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while the report is written: no plot, no report, no staging folder; the same command again
+    writes the report without --force."""
+    from tension_zones.calibration import _report
+
+    csv, dj = write_set(tmp_path, "nom", Truth(), 120, seed=2)
+    out = tmp_path / "out"
+    argv = ["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet"]
+
+    def interrupted(report):
+        raise KeyboardInterrupt
+
+    with monkeypatch.context() as m:
+        m.setattr(_report, "markdown", interrupted)
+        assert main(argv) == 130
+    assert "interrupted" in capsys.readouterr().err
+    assert list(out.iterdir()) == []
+    assert main(argv) == 0
+    assert {"report.json", "report.md"} <= {p.name for p in out.iterdir()}

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import tempfile
 import textwrap
 from pathlib import Path
 
@@ -329,8 +331,16 @@ def write_report(res: Result, out_dir, **extra) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     report = res.to_json()
     report.update(extra)
-    report["plots"] = [p.name for p in plot_residuals(res, out)] + [plot_paths(res, out).name]
-    report = _jsonable(report)
-    _write_text(out / "report.json", json.dumps(report, indent=1))
-    _write_text(out / "report.md", markdown(report))
+    # every file is made in a hidden staging folder and moved in at the end: an interrupted run leaves
+    # nothing that looks like a report (nor a plot that a rerun would refuse to overwrite)
+    stage = Path(tempfile.mkdtemp(dir=out, prefix=".partial-"))
+    try:
+        report["plots"] = [p.name for p in plot_residuals(res, stage)] + [plot_paths(res, stage).name]
+        report = _jsonable(report)
+        _write_text(stage / "report.json", json.dumps(report, indent=1))
+        _write_text(stage / "report.md", markdown(report))
+        for f in [*report["plots"], "report.json", "report.md"]:
+            os.replace(stage / f, out / f)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
     return report
