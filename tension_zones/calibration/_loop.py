@@ -76,7 +76,7 @@ from ._diagnose import _norm_isf, chi2_quantile, features, noise_floor, score_te
 from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
-from ._register import GlobalRegistration, global_registration, rotation_vector
+from ._register import GlobalRegistration, global_registration, kabsch, rotation_vector
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -697,6 +697,10 @@ def _register(pb: Problem, data: Dataset, rows, nominal, library) -> GlobalRegis
         hi = reg_block.bounds(pb.model, pb._phys_np)[1]
         reach = (float(hi[0]), float(hi[3]))
 
+    w = np.zeros(pb.n)
+    w[: len(rows)] = rows
+    pb.fit(pb.null, nominal, w, max_iter=0)  # the loop's fits' program (rows), not one of every sample
+
     def predict(moved):
         theta = pb.null if moved is None else _initial(pb, moved, pb.null, nominal)
         return _base_frame_prediction(pb, theta, nominal)[: data.n_samples]  # (a validation file follows)
@@ -733,12 +737,11 @@ def initial_pattern_rotation(structure, phys0, data: Dataset) -> np.ndarray:
     return out
 
 
-def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
-    """The model's prediction in the robot's base frame (no registration): where the tip is, for the
-    residual's features."""
+def _base_frame_prediction(pb: Problem, theta, active, frame=("registration", "offset", "marker")) -> np.ndarray:
+    """The model's prediction in the robot's base frame (the blocks ``frame`` at null): where the tip
+    is, for the residual's features."""
     th = np.asarray(theta).copy()
     sl = pb.spec.slices()
-    frame = ("registration", "offset", "marker")
     for name in frame:
         if name in sl:
             th[sl[name]] = pb.null[sl[name]]
@@ -748,14 +751,11 @@ def _base_frame_prediction(pb: Problem, theta, active) -> np.ndarray:
 def measurement_frame(pb: Problem, theta, active, reg: GlobalRegistration | None) -> dict:
     """The measurement frame against the robot's base, ``p_measured = R p_base + t``: the global
     registration composed with the fitted frame blocks (offset, registration; a common turn about the
-    robot's axis is the patterns' rotation's, not in ``R``). Rotation vector (deg) and translation (mm)."""
-    sl, on = pb.spec.slices(), dict(zip(pb.names, pb.on(active)))
-    out = {"p": np.r_[np.zeros((1, 3)), np.eye(3)], "R": np.tile(np.eye(3), (4, 1, 1))}
-    for b in pb.spec.blocks:
-        if b.name in ("offset", "registration") and b.name in active:
-            out = b.on_outputs(np.asarray(theta)[sl[b.name]], out, pb.model, on)
-    p = np.asarray(out["p"])
-    R, t = (p[1:] - p[0]).T, p[0]
+    robot's axis is the patterns' rotation's, not in ``R``), from the model's predictions with and
+    without those blocks (a rigid map between them, exact). Rotation vector (deg), translation (mm) and
+    the robot's axis in the measurement frame."""
+    base = _base_frame_prediction(pb, theta, active, frame=("registration", "offset"))
+    R, t = kabsch(base, pb.predict(theta, active))
     if reg is not None and reg.applied:
         R, t = reg.R @ R, reg.R @ t + reg.t
     return {"rotation_deg": np.degrees(rotation_vector(R)).tolist(), "translation_mm": t.tolist(),
