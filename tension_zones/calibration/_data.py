@@ -120,8 +120,10 @@ class Dataset:
     def _wire_column(self, k: int) -> str:
         return f"servo_{self.servo_ids[k]}_mm" if self.servo_ids is not None else f"q{k + 1}"
 
-    def check_against(self, robot) -> None:
-        """Refuse data that cannot be millimetres of ``robot`` (a :class:`~tension_zones.model.Robot`).
+    def check_against(self, robot, moving: bool = True) -> None:
+        """Refuse data that cannot be millimetres of ``robot`` (a :class:`~tension_zones.model.Robot`);
+        with ``moving``, also a tip that never moves (data to fit on: a validation file may hold a robot
+        whose slack wires leave it still).
 
         With ``L`` the robot's total length (see the module's constants for the arguments):
 
@@ -146,7 +148,7 @@ class Dataset:
         if spread < lo <= 1000 * spread <= hi:
             raise DataError(f"{name}: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it: are the positions in "
                             f"metres? Millimetres are expected ({1000 * spread:.3g} mm in millimetres)")
-        if spread < lo:
+        if spread < lo and moving:
             raise DataError(f"{name}: the tip never moves: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it "
                             f"({lo:.3g} mm)")
         if spread > hi:

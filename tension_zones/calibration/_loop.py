@@ -273,8 +273,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     t0 = time.perf_counter()
     say = log or (lambda s: None)
     robot = Robot(robot) if isinstance(robot, Design) else robot
-    for d in (data,) if validate is None else (data, validate):
-        d.check_against(robot)
+    data.check_against(robot)
+    if validate is not None:
+        validate.check_against(robot, moving=False)
     if validate is not None:
         check_validation(data, validate)
     n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
@@ -758,8 +759,10 @@ def measurement_frame(pb: Problem, theta, active, reg: GlobalRegistration | None
     R, t = kabsch(base, pb.predict(theta, active))
     if reg is not None and reg.applied:
         R, t = reg.R @ R, reg.R @ t + reg.t
-    return {"rotation_deg": np.degrees(rotation_vector(R)).tolist(), "translation_mm": t.tolist(),
-            "axis": R[:, 2].tolist()}
+    # (rounded far below any tracker's resolution: the same model evaluated over other samples, e.g.
+    # with a validation file, differs in the last bits)
+    return {"rotation_deg": np.round(np.degrees(rotation_vector(R)), 9).tolist(),
+            "translation_mm": np.round(t, 9).tolist(), "axis": np.round(R[:, 2], 12).tolist()}
 
 
 def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
