@@ -276,7 +276,6 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     data.check_against(robot)
     if validate is not None:
         validate.check_against(robot, moving=False)
-    if validate is not None:
         check_validation(data, validate)
     n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
                              * robot.n_segments)

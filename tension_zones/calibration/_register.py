@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import numpy as np
 
+from .._numerics import rotvec_to_matrix
 from ._data import Dataset
 
 #: Fixed-point iterations between the transform and the data's pattern rotations (closed forms both).
@@ -50,20 +52,22 @@ def kabsch(a, b, w=None) -> tuple[np.ndarray, np.ndarray]:
 
 
 def rotation_vector(R) -> np.ndarray:
-    """The rotation vector (3,) (rad) of a rotation matrix (its angle in [0, pi])."""
+    """The rotation vectors (..., 3) (rad, angle in [0, pi]) of rotation matrices (..., 3, 3)."""
     R = np.asarray(R, float)
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    axis = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(angle) n
-    angle = np.arctan2(np.linalg.norm(axis) / 2.0, c)
-    if angle < 1e-8:
-        return axis / 2.0
-    if angle > 3.0:  # near a half turn the skew part vanishes: the axis from the symmetric part
-        M = ((R + R.T) / 2.0 - c * np.eye(3)) / (1.0 - c)  # = n n^T for the unit axis n
-        k = int(np.argmax(np.diag(M)))
-        v = M[:, k] / np.sqrt(max(M[k, k], 1e-300))
-        v = v if v @ axis >= 0 else -v  # the skew part's sign, where it is still above round-off
-        return angle * v / np.linalg.norm(v)
-    return angle * axis / (2.0 * np.sin(angle))
+    c = np.clip((np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    axis = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], -1)
+    s2 = np.linalg.norm(axis, axis=-1)  # 2 sin(angle)
+    angle = np.arctan2(s2 / 2.0, c)
+    small, half = angle < 1e-8, angle > 3.0
+    out = axis * np.where(small, 0.5, angle / np.where(small, 1.0, s2))[..., None]
+    # near a half turn the skew part vanishes: the axis from the symmetric part, n n^T
+    sym = (R + np.swapaxes(R, -1, -2)) / 2.0 - c[..., None, None] * np.eye(3)
+    M = sym / np.where(half, 1.0 - c, 1.0)[..., None, None]
+    k = np.argmax(np.diagonal(M, axis1=-2, axis2=-1), axis=-1)
+    v = np.take_along_axis(M, k[..., None, None], axis=-1)[..., 0]
+    v = v * np.sign(np.where(np.sum(v * axis, axis=-1) < 0, -1.0, 1.0))[..., None]  # the skew part's sign
+    v = v / np.maximum(np.linalg.norm(v, axis=-1), 1e-300)[..., None]
+    return np.where(half[..., None], angle[..., None] * v, out)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -94,7 +98,7 @@ class GlobalRegistration:
         p = (np.asarray(data.p) - self.t) @ self.R
         rot = None
         if data.rot is not None:
-            rot = np.array([rotation_vector(self.R.T @ _matrix(w)) for w in np.asarray(data.rot)])
+            rot = rotation_vector(self.R.T @ np.asarray(jax.vmap(rotvec_to_matrix)(np.asarray(data.rot, float))))
         return dataclasses.replace(data, p=p, rot=rot)
 
     def to_measured(self, p) -> np.ndarray:
@@ -115,16 +119,6 @@ class GlobalRegistration:
         R = np.asarray(d["matrix"], float)
         return GlobalRegistration(R=R, t=np.asarray(d["translation_mm"], float), rmse_mm=d["rmse_mm"],
                                   explained=d["explained"], applied=True, reason=d["reason"])
-
-
-def _matrix(w) -> np.ndarray:
-    """The rotation matrix of a rotation vector (Rodrigues)."""
-    w = np.asarray(w, float)
-    a = np.linalg.norm(w)
-    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
-    if a < 1e-12:
-        return np.eye(3) + K
-    return np.eye(3) + np.sin(a) / a * K + (1.0 - np.cos(a)) / a**2 * K @ K
 
 
 def global_registration(predict, data: Dataset, rows, reach=None) -> GlobalRegistration:
