@@ -54,8 +54,9 @@ def assert_stats_equal(got, refs, rtol=1e-12):
             np.testing.assert_allclose(got[k][i], v, rtol=rtol, atol=1e-300, err_msg=f"design {i}, {k}")
 
 
-designs_st = st.lists(  # length, pitch radius, offsets of the three wires from even spacing (rad)
-    st.tuples(st.floats(5.0, 40.0), st.floats(0.5, 4.0), *[st.floats(-0.9, 0.9)] * 3),
+designs_st = st.lists(  # length, pitch radius, offsets of the three wires from even spacing (rad); the
+    # lengths from 8 mm: a pitch radius above half the length is refused (Design: MAX_RADIUS_PER_LENGTH)
+    st.tuples(st.floats(8.0, 40.0), st.floats(0.5, 4.0), *[st.floats(-0.9, 0.9)] * 3),
     min_size=1, max_size=6)
 
 
