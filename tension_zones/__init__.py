@@ -1,9 +1,10 @@
 """tension-zones: pull-only (tendon) actuation analysis for continuum robots, in JAX.
 
-Importing the package enables float64 in JAX (see :mod:`tension_zones._config`), but imports nothing
-heavy: every public name below is loaded from its sub-package on first use (PEP 562), so
-``tension-zones --help`` and ``import tension_zones`` do not pay for importing JAX.
-``import tension_zones as tz; tz.Design(...)`` works as before.
+Importing the package enables float64 in JAX and does nothing else: it imports nothing heavy (every
+public name below is loaded from its sub-package on first use, PEP 562, so ``tension-zones --help``
+and ``import tension_zones`` do not import JAX), and it leaves ``XLA_FLAGS`` and the file system
+alone. The XLA settings and the compilation cache are applied when a sub-package first loads JAX,
+before anything is compiled (see :mod:`tension_zones._config`).
 """
 
 import importlib
@@ -13,15 +14,11 @@ import sys
 # float64 before any array is made: if JAX is not imported yet, its own switch (read when JAX is
 # imported) is set here without importing it; if it is, the flag is set now (cheap: JAX is loaded).
 # TENSION_ZONES_X64=0 leaves JAX's setting alone (see _config).
-if "jax" in sys.modules:
-    from . import _config  # noqa: F401
-else:
-    if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
+if os.environ.get("TENSION_ZONES_X64", "1").strip().lower() not in ("0", "false", "no", "off"):
+    if "jax" in sys.modules:
+        sys.modules["jax"].config.update("jax_enable_x64", True)
+    else:
         os.environ.setdefault("JAX_ENABLE_X64", "1")
-    from ._xla import set_cache_env, with_scheduler_off
-
-    os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))  # see _xla
-    set_cache_env()  # compiled programs kept on disk (see _xla)
 
 __version__ = "0.1.0"
 

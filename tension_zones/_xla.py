@@ -1,19 +1,25 @@
-"""The XLA settings the package makes (no JAX import here: the lazy top-level package uses it too).
+"""The XLA settings the package makes (no JAX import at module level: the lazy top-level package
+and the test suite's ``conftest.py`` read it before JAX is loaded).
 
-XLA's concurrency-optimised CPU scheduler can leave a computation waiting forever on the package's
-large vmapped while loops (see :mod:`._config`), so it is turned off unless ``XLA_FLAGS`` already
-says otherwise.
+:func:`apply_settings` is applied by :mod:`._config` when a sub-package first loads JAX, before
+anything is compiled; ``import tension_zones`` alone applies nothing.
 
-**A persistent compilation cache.** The calibration's programs take 5-15 s each to compile on a
-laptop and the same robot is calibrated again and again, so compiled programs are kept on disk
-(JAX's own persistent cache): the second ``tension-zones calibrate`` of a robot skips XLA's compile.
-The folder is ``$TENSION_ZONES_CACHE`` if set (``0``/``off``: no cache), else
-``$XDG_CACHE_HOME/tension-zones/jax`` (``~/.cache/tension-zones/jax``); a cache the user configured for
-JAX (``JAX_COMPILATION_CACHE_DIR``) is left alone, and a folder that cannot be created means no cache.
+**XLA's CPU scheduler.** XLA's concurrency-optimised CPU scheduler can leave a computation waiting
+forever on the package's large vmapped while loops, so it is turned off unless ``XLA_FLAGS`` already
+names the flag (``--xla_cpu_enable_concurrency_optimized_scheduler=true`` keeps it on).
+
+**A persistent compilation cache.** The calibration's programs are large and the same robot is
+calibrated again and again, so compiled programs are kept on disk (JAX's own persistent cache): the
+second ``tension-zones calibrate`` of a robot skips XLA's compile. The folder is
+``$TENSION_ZONES_CACHE`` if set (``0``/``off``: no cache), else ``$XDG_CACHE_HOME/tension-zones/jax``
+(``~/.cache/tension-zones/jax``); JAX creates it at its first compile. A cache the user configured
+for JAX (``JAX_COMPILATION_CACHE_DIR``) is left alone, and a folder that cannot be created means no
+cache. Deleting the folder is safe: it only costs the next run its compile.
 """
 
 import functools
 import os
+from pathlib import Path
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
 _FUSION = "xla_cpu_use_fusion_emitters"
@@ -28,13 +34,26 @@ def with_scheduler_off(flags: str) -> str:
 _OFF = ("0", "false", "no", "off", "")
 
 
-def cache_dir() -> str | None:
-    """The compilation-cache folder the package would use (created), or None (off or not writable)."""
+def _creatable(path: Path) -> bool:
+    """Whether ``path`` is a writable folder or could be made as one (nothing is created)."""
+    path = path.absolute()
+    while not path.exists():
+        if path.parent == path:
+            return False
+        path = path.parent
+    return path.is_dir() and os.access(path, os.W_OK | os.X_OK)
+
+
+def cache_dir(create: bool = True) -> str | None:
+    """The compilation-cache folder the package uses, or None (turned off or not writable).
+    ``create=False`` makes nothing: the folder is only checked to be writable or creatable."""
     env = os.environ.get("TENSION_ZONES_CACHE")
     if env is not None and env.strip().lower() in _OFF:
         return None
     path = env or os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"),
                                "tension-zones", "jax")
+    if not create:
+        return path if _creatable(Path(path)) else None
     try:
         os.makedirs(path, exist_ok=True)
     except OSError:
@@ -42,10 +61,17 @@ def cache_dir() -> str | None:
     return path if os.access(path, os.W_OK) else None
 
 
-def set_cache_env() -> None:
-    """Before JAX is imported: point JAX's own switch at the cache (unless the user set one)."""
-    if "JAX_COMPILATION_CACHE_DIR" not in os.environ and (path := cache_dir()):
-        os.environ["JAX_COMPILATION_CACHE_DIR"] = path
+def apply_settings() -> None:
+    """The package's XLA settings (see the module's docstring), for a process that has imported JAX
+    and compiled nothing yet: the CPU scheduler off in ``XLA_FLAGS`` (XLA reads the variable when JAX
+    creates its CPU client), and JAX's compilation cache pointed at :func:`cache_dir` unless the user
+    configured one. Idempotent."""
+    import jax
+
+    os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))
+    mine = jax.config.jax_compilation_cache_dir is None and "JAX_COMPILATION_CACHE_DIR" not in os.environ
+    if mine and (path := cache_dir(create=False)):
+        jax.config.update("jax_compilation_cache_dir", path)
 
 
 @functools.cache
@@ -65,23 +91,16 @@ def fast_compile_options(optimise: bool = True) -> dict:
     well, for a program that runs too little to pay for LLVM's optimisation (the caller measured it:
     ``calibration/_problem.py``, ``_optimised``).
 
-    XLA:CPU's MLIR fusion emitters (jaxlib 0.5.3 on; the first release with the switch) take much of
+    XLA:CPU's MLIR fusion emitters (jaxlib 0.5.3 on, the first release with the switch) take much of
     the compile time of these large programs; the older emitters compile them faster and run them as
-    fast. Measured on this 2-core machine, no compilation cache, each side twice, interleaved: the
-    500-sample single-segment calibration (``unknown_a_3w``) 23.3 / 25.5 s -> 19.9 / 19.5 s (its
-    first call, trace and compile of the constant-curvature program, 8.9 / 10.3 -> 7.3 / 6.0 s; the
-    rod's 9.8 / 10.4 -> 7.6 / 8.8 s; a 41-iteration fit 0.61 / 0.66 -> 0.57 / 0.65 s); the FTDCR v4
-    calibration 107.8 -> 111.9 s (once each: fits dominate there, no gain); the notebook 04
-    optimisation's first call 33.6 / 27.9 -> 21.6 / 25.9 s; the identification's first call 10.2 / 10.5
-    -> 8.8 / 7.6 s (a later call 0.15-0.17 s either way). Results equal to 1e-15. The sweeps keep
-    XLA's defaults (their run time matters). JAX takes such options on top-level jits only; older
-    jaxlibs do not know the switch (nor have those emitters): no fusion option there.
+    fast, with the same results to rounding. The sweeps keep XLA's defaults (their run time matters).
+    JAX takes such options on top-level jits only; older jaxlibs do not know the switch (nor have
+    those emitters): no fusion option there.
 
     LLVM's optimisation level is pinned at XLA's default (3): these programs run long (a calibration's
     fits), so a process-wide lower level meant for many small programs (the test suite's:
-    ``tests/conftest.py``) must not reach them. At level 0 the 500-sample calibration's two programs
-    compiled in 6.8 / 8.0 s instead of 11.1 / 13.6 s, but its fits and evaluations ran 2.5 / 0.9 ->
-    4.1 / 3.1 s, and the end-to-end calibration tests took 261 s instead of 230 s.
+    ``tests/conftest.py``) must not reach them; level 0 compiles them faster but slows their fits by
+    more than it saves.
     """
     opts = {_LLVM_LEVEL: 3 if optimise else 0}
     if _jaxlib_version() >= (0, 5, 3):
@@ -96,12 +115,11 @@ def fast_compile_flag() -> str:
 
 
 # -- programs kept on disk before tracing ------------------------------------------------------------
-# JAX's cache skips XLA's compile but not the tracing and lowering that compute its key: for the
-# calibration's programs (an equilibrium solve differentiated inside a least-squares loop) those take
-# 2.5-3.5 s each, every process. ``jax.export`` keeps the lowered program itself (its versioned
-# serialisation, which needs ``flatbuffers``), so a later process loads it and only JAX's cache lookup
-# remains. Measured on the 500-sample calibration (``unknown_a_3w``, cache filled): first call of its
-# program 3.0 s -> 0.7 s, results bit for bit equal.
+# JAX's cache skips XLA's compile but not the tracing and lowering that compute its key, which for
+# the calibration's programs (an equilibrium solve differentiated inside a least-squares loop) are a
+# large part of a run. ``jax.export`` keeps the lowered program itself (its versioned serialisation,
+# which needs ``flatbuffers``), so a later process loads it and only JAX's cache lookup remains; the
+# results are the same bit for bit.
 
 
 @functools.cache

@@ -7,7 +7,7 @@ import sys
 
 from tension_zones._xla import cache_dir
 
-PROBE = ("import tension_zones, jax, jax.numpy as jnp, time\n"
+PROBE = ("import tension_zones.model, jax, jax.numpy as jnp, time\n"
          "print(jax.config.jax_compilation_cache_dir or os.environ.get('JAX_COMPILATION_CACHE_DIR'))\n")
 
 
@@ -36,6 +36,12 @@ def test_cache_folder_from_the_environment(tmp_path, monkeypatch):
     blocker.write_text("x")
     monkeypatch.setenv("TENSION_ZONES_CACHE", str(blocker / "sub"))  # cannot be created: no cache
     assert cache_dir() is None
+    assert cache_dir(create=False) is None
+
+
+def test_the_folder_is_only_checked_without_create(tmp_path, monkeypatch):
+    monkeypatch.setenv("TENSION_ZONES_CACHE", str(tmp_path / "a" / "b"))
+    assert cache_dir(create=False) == str(tmp_path / "a" / "b") and not (tmp_path / "a").exists()
 
 
 def test_a_fresh_process_uses_the_cache_and_a_users_jax_setting_wins(tmp_path):
