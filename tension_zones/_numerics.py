@@ -240,7 +240,8 @@ def rotvec_to_matrix(w):
 #: Up to this many wires, per-wire work is written on lists of per-pose scalars, unrolled: vmapped
 #: they are plain (N,) arrays that XLA:CPU fuses, the fastest to run (benchmarks/README.md). Above
 #: it, on (n,) arrays: the unrolled program grows with n (pair terms with n^2) and so does its
-#: compile time (67 s for the kinematic measures at 24 wires); the array program does not.
+#: compile time (at 24 wires the kinematic measures' program compiles far longer than it runs); the
+#: array program does not.
 UNROLL_MAX_WIRES = 8
 
 
@@ -253,8 +254,8 @@ def compact_programs():
     work on (n,) arrays and the statics' free sets vectorised, whatever the wire count.
 
     For programs whose compile time outweighs their run time, such as the design optimiser's (its
-    default scenario with four wires: the first run 32.0 s, a second 1.2 s; compact, 17.2 s and
-    1.4 s). Same values up to rounding. Like :func:`frozen_masks`, a ``jit`` keeps the form it was
+    compile is most of its first run, and the compact forms compile faster). Same values up to
+    rounding. Like :func:`frozen_masks`, a ``jit`` keeps the form it was
     traced with: trace inside the context.
     """
     _COMPACT.append(True)

@@ -126,7 +126,7 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
 
 
 def plot_tradeoff(result: dict, path):
-    """Issue 5: each objective term of the best design of every wire count against the count."""
+    """Each objective term of the best design of every wire count against the count."""
     rows = [r for r in result["per_wire_count"] if "objective" in r]
     fig, axes = plt.subplots(1, 3, figsize=(12, 3.8))
     n = [r["n_wires"] for r in rows]
@@ -156,7 +156,7 @@ def plot_tradeoff(result: dict, path):
 
 
 def plot_convergence(result: dict, path, infeasible_rank: float):
-    """Issue 5: best-so-far exact objective per Adam step, one line per wire count (best start)."""
+    """Best-so-far exact objective per Adam step, one line per wire count (best start)."""
     fig, ax = plt.subplots(figsize=(6.4, 4))
     for n, hist in result["history"].items():
         h = np.asarray(hist, dtype=float)
@@ -191,7 +191,7 @@ def _by_wire_count(table):
 
 
 def plot_front(table: dict, columns, front, path=None):
-    """Issue 16: every design of an exploration (colour: wire count) and its Pareto ``front`` (bool
+    """Every design of an exploration (colour: wire count) and its Pareto ``front`` (bool
     per design, black-edged), for two columns (one scatter, the front joined as a staircase) or three
     (the three pairs side by side); ``min:``/``max:`` prefixes as in ``pareto_front``. Saves to
     ``path`` if given; returns the figure."""
@@ -230,7 +230,7 @@ def plot_front(table: dict, columns, front, path=None):
 
 
 def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines: int = 1500):
-    """Issue 16: parallel coordinates of an exploration: ``fields`` (default: every design field that
+    """Parallel coordinates of an exploration: ``fields`` (default: every design field that
     varies, but the wire angles, whose meaning changes with the wire count) and the front's
     ``columns``, each axis scaled to its range (ends labelled). Front designs are coloured by wire
     count, the others grey (at most ``max_lines`` of them, evenly picked). Returns the figure."""

@@ -18,14 +18,14 @@ if "TENSION_ZONES_CACHE" not in os.environ:
 os.environ.setdefault("TENSION_ZONES_WORKERS", "0")
 
 # the tests are compile-bound (small inputs, thousands of programs): XLA:CPU's older emitters compile
-# them faster (the package's large programs use them already: tension_zones/_xla.py), the suite
-# 722.4 -> 599.9 s on 2 cores (same machine, an hour apart); subprocesses inherit the flag. The package's own default codegen is what
+# them faster (the package's large programs use them already: tension_zones/_xla.py); subprocesses
+# inherit the flag. The package's own default codegen is what
 # test_xla_cache.py compares against, in a child process without it.
 from tension_zones._xla import fast_compile_flag  # (no JAX import)
 
 # For the same reason LLVM optimises the suite's programs at level 0 (XLA's default: 3), except the
-# package's long-running ones, which pin level 3 (``fast_compile_options``): the model, rod and robot
-# tests 227.9 -> 155.7 s on 2 cores, one run after the other. Results are the same (no fast math either way).
+# package's long-running ones, which pin level 3 (``fast_compile_options``). Results are the same (no
+# fast math either way).
 _LEVEL_0 = "--xla_backend_optimization_level=0"
 for _flag in (fast_compile_flag(), _LEVEL_0):
     if _flag and _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
@@ -44,8 +44,8 @@ settings.load_profile("ci")
 
 
 def _maps_soft_limit() -> int:
-    """70 % of the kernel's limit (65 530 by default -> 45 871): the rest, about 700 programs, is left for
-    one test (the most a worker was seen to add in 5 s: 2 717 maps)."""
+    """70 % of the kernel's limit (45 871 of the default 65 530): the rest, about 700 programs, is
+    left for one test (a few thousand maps, the most one test adds)."""
     try:
         with open("/proc/sys/vm/max_map_count") as f:
             return int(0.7 * int(f.read()))

@@ -243,10 +243,10 @@ def test_a_rod_beside_a_preload_is_named_on_a_second_look(tmp_path):
 @pytest.mark.slow
 def test_a_near_tie_is_decided_by_looking_ahead(tmp_path):
     """A rod under its weight with backlash: under constant curvature a tip force and the weight tie in
-    the first round (held out 3.590 against 3.603 mm) and the tip force was kept; with it the rod explains
-    nothing, a preload and the geometry stood in, and the loop ended at 1.10x the noise floor with
-    structure left. Ending so, the loop goes on from the runner-up too and keeps the branch that ends
-    significantly lower: the weight, the backlash and the rod, at the floor. (In the set's own frame with
+    the first round, and the tip force scores a little better; with it the rod explains nothing, and
+    a preload and the geometry would stand in, above the noise floor with structure left. Ending so,
+    the loop goes on from the runner-up too and keeps the branch that ends significantly lower: the
+    weight, the backlash and the rod, at the floor. (In the set's own frame with
     the tracker's tilt a candidate, the conditions it was made for: registered, with the tilt in the
     nominal frame, there is no tie.)"""
     truth = RobotTruth(gravity=(0.0, 0.002, -0.003), pieces=6, play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35))
@@ -269,8 +269,8 @@ def test_a_near_tie_is_decided_by_looking_ahead(tmp_path):
 def test_a_single_rod_segment_under_its_weight_is_named_a_rod(tmp_path):
     """One segment (the robot's second alone, 300 samples) bending as a rod under its weight. The rod's
     refit starts from the elastic rod (``VariableCurvature.start``): from constant curvature its short
-    refit stayed where it was (0.1274 mm held out; the solver held the curvature freedom on its bound
-    while the other parameters moved), a marker offset was named instead, and the rod never was. Which
+    refit would stay where it is (the solver holds the curvature freedom on its bound while the other
+    parameters move), and a marker offset would be named instead. Which
     load explains the sag is a tie this recording cannot decide (a tip force or the weight, held out
     0.1271 against 0.1272 mm): either is accepted here. With the tracker's tilt in the nominal frame a
     change of the segment's geometry ties with the rod too (held out 0.0858 against 0.0863 mm, 1.06x
@@ -302,7 +302,7 @@ def test_a_single_segments_hole_clearance_is_named_and_fitted(tmp_path):
 def test_a_drift_of_the_wires_is_named_and_fitted(tmp_path):
     """Every wire lengthens at 2 mm per hour on the recording's clock (thermal expansion, creep): the
     loop names the drift alone, fits its rate, and the held-out error reaches the noise floor. The
-    validation file (recorded 80 min later, the drift gone on) is predicted with the drift held at the
+    validation file (recorded later, the drift gone on) is predicted with the drift held at the
     training file's end: never a trend extrapolated."""
     rep = run(tmp_path, "wire_drift", RobotTruth(wire_drift=2.0))
     assert names(rep) == ["drift"]
@@ -316,13 +316,12 @@ def test_a_drift_of_the_wires_is_named_and_fitted(tmp_path):
                                   ("compression", "clearance"), ("compression", "preload"),
                                   ("compression", "friction")])
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
-    """Two effects at once. Geometry with a tracker tilt: the loop named a marker offset instead (4.3x
-    the noise floor) until it took a second look where no score was significant. The hole clearance
+    """Two effects at once. Geometry with a tracker tilt: it takes the second look where no score is
+    significant (a marker offset would otherwise be named). The hole clearance
     with friction, and the backbone's compression with it: all make the distal segments bend less the
     more the proximal ones bend. The compression with a preload: both change the wires' tension. The
-    compression with friction: the loop named the compression alone and flagged the rest (0.53 mm
-    after, 6x the floor) until the solve stopped cycling on a wire pulled alone (test_compression.py);
-    friction's refit had the held-out part at the floor but the training part worse than before."""
+    compression with friction: both are named only where the solve does not cycle between taut sets on
+    a wire pulled alone (test_compression.py)."""
     a, b = pair
     nominal = RobotTruth()
     own_b = {f.name: getattr(EFFECTS[b], f.name) for f in dataclasses.fields(nominal)
@@ -335,8 +334,8 @@ def test_pairs_of_effects_are_both_named(tmp_path, pair):
 
 def test_a_round_with_nothing_to_score_ends_the_loop_cleanly(tmp_path):
     """The variable curvature alone on a robot without a load: the first round has nothing to score
-    (the rod is the constant-curvature robot then). The report is the nominal fit's; this ended in an
-    UnboundLocalError (the held-out count was set inside the round)."""
+    (the rod is the constant-curvature robot then). The report is the nominal fit's, and nothing in
+    the loop depends on a round having scored something."""
     from tension_zones.calibration.effects import BY_NAME
 
     train_csv, _, design = write_robot_set(tmp_path, "noload", RobotTruth(), seed=5, steps=6)

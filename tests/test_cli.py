@@ -134,8 +134,8 @@ def test_help_and_import_do_not_import_jax():
 
 @pytest.mark.parametrize("n", [16, 64])
 def test_maps_of_many_wires_stay_legible(tmp_path, n):
-    """Issue 14: 64 wires drew a black band of labels. Above plots.LABEL_MAX_WIRES the sectors carry
-    at most their taut count, and only every few rings is numbered."""
+    """Maps of many wires stay legible (not a black band of labels): above plots.LABEL_MAX_WIRES the
+    sectors carry at most their taut count, and only every few rings is numbered."""
     import matplotlib.pyplot as plt
 
     import tension_zones as tz

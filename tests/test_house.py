@@ -54,3 +54,84 @@ print(os.path.isdir(jax.config.jax_compilation_cache_dir))
                              "--xla_cpu_enable_concurrency_optimized_scheduler=false"]
     assert folder == str(home / ".cache" / "tension-zones" / "jax")
     assert (before, after) == ("False", "True")
+
+
+#: What package text (code, comments, docstrings, CLI help) must not say: a measurement of a day
+#: (a duration, a date, the machine it ran on) or a before/now comparison. Those live in git history
+#: and in generated benchmark output; the code says what it does and why.
+_NOTEBOOK = {
+    "a duration": r"\b\d+(?:\.\d+)?(?: ?[-/] ?\d+(?:\.\d+)?)? ?(?:s|ms|us|min|mins|minutes?|seconds?|hours?)\b(?![(\[_]|\.\w)",
+    "a date": r"\b20\d\d-[01]\d(?:-[0-3]\d)?\b",
+    "a machine": r"(?i)\bthis (?:\d+-core |shared )?machine\b|\b\d+-core\b|\blaptop\b|% CPU\b",
+    "a before/now figure": (r"(?i)\b(?:works|runs|is|as) as before\b|\bas before\b|\bwas [\d.]+.{0,40}\bnow\b"
+                            r"|\d(?: ?(?:s|mm|%|x))? ?-> ?\d|\d(?: ?(?:s|mm|us|%))? against \d|instead of \d+(?:[.,-]\d+)*\b"),
+}
+
+
+def _package_lines():
+    for path in sorted((ROOT / "tension_zones").rglob("*.py")):
+        for i, line in enumerate(path.read_text().splitlines(), 1):
+            yield path.relative_to(ROOT), i, line
+
+
+def _notebook_lines(lines):
+    import re
+
+    found = []
+    for path, i, line in lines:
+        for what, pattern in _NOTEBOOK.items():
+            if re.search(pattern, line):
+                found.append(f"{path}:{i}: {what}: {line.strip()}")
+    return found
+
+
+def test_package_code_cites_no_timing_date_machine_or_before_and_now():
+    assert _notebook_lines(_package_lines()) == []
+
+
+def test_the_notebook_patterns_catch_what_they_are_for_and_not_units():
+    bad = ["took 382 s against 86 s", "12.24-12.50 s -> 10.82 s wall", "(5 s with the flag off)",
+           "a compile takes 10-15 s", "8.7 / 8.8 s", "0.3-0.5 s in every process", "about 4 min",
+           "timings, 2026-12-04", "on this 2-core machine", "Measured on this machine", "works as before",
+           "validation 5.78 -> 4.29 mm", "4-5 iterations instead of 8-9", "(one run each: 153 against 136 us)"]
+    good = ["``B`` (2S,) the bending vectors", "tau >= f_min s.t. A tau = rhs", "(N mm) for x (2S,)",
+            "a 0.4 N lateral tip force", "stiffness 60 N/mm at 4.5 mm", "q (N,) (negative = pulled in)",
+            "jaxlib 0.5.3 on", "(mm, N, rad; reported in deg)", "exp(d_k (mu_0 + mu_1 w_ki))",
+            "np.min(x)", "1 s_k of wire k", "||tau||^2 s.t. A tau", "one root instead of 2n", "before the selection is over"]
+    flagged = _notebook_lines((Path("x.py"), i, line) for i, line in enumerate(bad + good))
+    assert sorted({int(f.split(":")[1]) for f in flagged}) == list(range(len(bad))), flagged
+
+
+def test_docstrings_do_not_open_with_an_issue_number():
+    import ast
+    import re
+
+    found = []
+    for path in sorted((ROOT / "tension_zones").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+                doc = ast.get_docstring(node)
+                if doc and re.match(r"(?i)issue \d+", doc):
+                    found.append(f"{path.relative_to(ROOT)}: {getattr(node, 'name', '<module>')}")
+    assert found == []
+
+
+def _docstrings(folder):
+    import ast
+
+    for path in sorted(folder.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            kinds = (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)
+            if isinstance(node, kinds) and (doc := ast.get_docstring(node)):
+                yield path.relative_to(ROOT), node, doc
+
+
+def test_test_docstrings_say_what_is_tested_not_its_history():
+    import re
+
+    lines = [(f"{path}:{getattr(node, 'name', '<module>')}", i, line)
+             for path, node, doc in _docstrings(ROOT / "tests") for i, line in enumerate(doc.splitlines())]
+    found = [f for f in _notebook_lines(lines) if ": a before/now figure:" not in f or "->" in f]
+    found += [f"{where}: {line}" for where, i, line in lines
+              if i == 0 and re.match(r"(?i)(regression|issue \d+)\b", line)]
+    assert found == []

@@ -137,7 +137,7 @@ def test_J_xb_matches_chain_rule_and_is_finite(b):
 
 
 def test_no_nan_at_the_straight_pose():
-    """Regression: values and gradients at theta_L = pi/2 and b = 0 are finite (no input nudging)."""
+    """Values and gradients at theta_L = pi/2 and b = 0 are finite (no input nudging)."""
     d = _design(4)
 
     def everything(x):

@@ -368,7 +368,7 @@ def test_many_wires_match_the_reference():
 @pytest.mark.parametrize("fn", ["kinematics", "compliance"])
 def test_the_program_does_not_grow_with_the_wire_count(fn):
     """No per-wire unrolling above UNROLL_MAX_WIRES: the traced program of one pose has the same
-    size for 16 and 64 wires (the unrolled one grew with n^2: 67 s to compile at 24 wires)."""
+    size for 16 and 64 wires (the unrolled one grows with n^2)."""
     def size(n):
         d = tz.Design(n, 20.0, 2.0)
 

@@ -477,7 +477,7 @@ def test_clearance_with_friction_in_the_rod_is_the_root_and_its_derivatives_are_
 
 
 def test_clearance_at_the_straight_pose_is_finite_with_finite_gradients():
-    """Regression guard: ``|b|`` has a cone at ``b = 0``; a preloaded segment of evenly spaced wires at
+    """``|b|`` has a cone at ``b = 0``; a preloaded segment of evenly spaced wires at
     ``q = 0`` stays straight and the tip's derivatives in the clearance and the commands are finite
     there."""
     rob = ms.Robot([tz.Design(3, 60.0, 4.5, backbone_EI=2400.0, wire_stiffness=60.0, preload=0.5)])
@@ -489,10 +489,10 @@ def test_clearance_at_the_straight_pose_is_finite_with_finite_gradients():
 
 
 def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():
-    """Regression: one wire pulled, the others paid out, a tip force pushing down and sideways: the
-    energy's Hessian at the straight start has a negative eigenvalue. The solve must still reach a
-    stationary point that is a minimum (the modified Newton once took a near-infinite step there and
-    stayed at the start)."""
+    """One wire pulled, the others paid out, a tip force pushing down and sideways: the energy's
+    Hessian at the straight start has a negative eigenvalue. The solve must still reach a stationary
+    point that is a minimum (a Newton step on that Hessian would be near-infinite and stay at the
+    start)."""
     rob = ms.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), backbone_EI=1800.0,
                               wire_stiffness=30.0),
                     tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), backbone_EI=2400.0,

@@ -202,8 +202,9 @@ def test_pieces_must_be_a_positive_integer():
 
 @pytest.mark.slow
 def test_a_large_rod_batch_runs_to_the_end():
-    """Regression: XLA's concurrency-optimised CPU scheduler hung this (1000 samples of a
-    three-segment robot in pieces: every thread idle); the package turns it off (_config)."""
+    """1000 samples of a three-segment robot in pieces run to the end: XLA's concurrency-optimised
+    CPU scheduler can leave such a vmapped while loop waiting with every thread idle, and the package
+    turns it off (_xla.apply_settings)."""
     import subprocess
     import sys
 
@@ -222,10 +223,9 @@ def test_a_warm_start_reaches_the_cold_start_equilibrium(m, friction):
     """``solve_warm`` from another solve's state (its equilibrium and learnt load curvature, at other
     parameters and commands) lands on the equilibrium a cold solve finds, and returns its own state;
     its derivatives are the cold solve's (the state carries none). Loaded: weight and a tip force.
-    Jitted: eagerly it compiled dozens of one-primitive programs. Its worker crashed here three times
-    in full runs, inside ``deserialize_executable``: late in a run a worker held over 50 000 memory
-    maps (about 28 per loaded program), near Linux's limit of 65 530, and loading one more failed; the
-    suite now frees its programs past a soft limit (``conftest.py``)."""
+    Jitted: eagerly it would compile dozens of one-primitive programs. (Each loaded program holds
+    memory maps, and a worker of a full run comes near Linux's limit of them: the suite frees its
+    programs past a soft limit, ``conftest.py``.)"""
     solve, solve_warm = jax.jit(E.solve, static_argnums=1), jax.jit(E.solve_warm, static_argnums=1)
     robot = tz.Robot([SEG, tz.Design(4, 40.0, 3.0, wire_stiffness=40.0, backbone_EI=1800.0)])
     st = Structure(robot.n_wires_per_segment, m)

@@ -223,8 +223,8 @@ def test_cli_sweep_bad_out_path(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_cli_sweep_32_wires_within_a_minute(tmp_path):
-    """Issue 14: 32 wires compiled for minutes (per-wire unrolling); now the program does not grow
-    with the wire count (test_metrics) and the chunk shrinks with it (default_chunk)."""
+    """A sweep of many wires stays quick: the program does not grow with the wire count (per-wire
+    work on arrays, test_metrics) and the chunk shrinks with it (default_chunk)."""
     import time
 
     from tension_zones.analysis._sweep import default_chunk

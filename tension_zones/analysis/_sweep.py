@@ -171,8 +171,8 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
             if missing:
                 raise ValueError(f"keep names unknown output(s) {missing}; the function returns {sorted(res)}")
             # one block per dtype and shape, each output a row of it: a few large allocations, which
-            # NumPy backs with huge pages, rather than one per output (4 KB first-touch page faults:
-            # 8,000 instead of 900 for a 246k-pose kinematic sweep run after a NumPy job)
+            # NumPy backs with huge pages, rather than one per output (whose 4 KB pages would each
+            # fault on first touch: many times as many page faults on a large sweep)
             groups = collections.defaultdict(list)
             for k, v in res.items():
                 if keep is None or k in keep:
@@ -279,12 +279,11 @@ def sweep_grid(
 # Many designs at once: per-design statistics over one grid
 # ------------------------------------------------------------------------------------------------
 #: Designs per compiled call of :func:`sweep_designs`: the unit of progress, of the work a process
-#: takes and of what a resumed exploration keeps (about 0.1-0.3 s of work on the paper's grid).
+#: takes and of what a resumed exploration keeps (a small amount of work on the paper's grid).
 DEFAULT_DESIGN_CHUNK = 128
 #: Poses per step of each design's loop in :func:`sweep_designs`. Not a power of two: at 128, 256,
-#: 512 and 1024 poses the kinematic measures took 1.4-1.7x the CPU time per pose they take at 896,
-#: 1000, 1320 or 1344 (4 wires, interleaved runs; strides that are multiples of 4 KB alias in the
-#: caches). 1320 holds the paper's 18 x 145 grid in two steps with 1% padding.
+#: 512 and 1024 poses the kinematic measures cost markedly more CPU per pose than at 896, 1000,
+#: 1320 or 1344 (strides that are multiples of 4 KB alias in the caches). 1320 holds the paper's 18 x 145 grid in two steps with 1% padding.
 DESIGN_POSE_CHUNK = 1320
 #: Reductions over a design's poses, with NumPy's meaning: ``max``, ``min``, ``mean`` (a NaN pose makes
 #: the result NaN), ``nanmax``, ``nanmean`` (over the non-NaN poses; NaN when there is none).
@@ -344,7 +343,7 @@ def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, 
     share). Mapped over the designs (a loop inside the program), not vmapped: inside the map each
     design is unbatched, so the fusion barrier of :func:`~tension_zones._numerics.keep` (anchored on
     the design's length) stays a barrier; vmapped over designs it becomes a select and the kinematic
-    measures ran 6x slower (155 vs 909 designs/s, 4 wires, the paper's grid). Poses are vmapped.
+    measures run several times slower. Poses are vmapped.
     """
     chunk, mesh = layout
 
@@ -365,7 +364,7 @@ _designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
 @functools.lru_cache(maxsize=64)
 def _output_shapes(fn, n_wires, dtype, arg_specs):
     """``{output: shape}`` of ``fn`` at one pose (traced once per function, wire count and argument
-    shapes: tracing the kinematic measures takes 0.4 s, more than exploring a few designs)."""
+    shapes: tracing the kinematic measures costs more than exploring a few designs)."""
     spec = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype),
                                   Design(n_wires, 2.0, 1.0, dtype=dtype))
     scalar = jax.ShapeDtypeStruct((), dtype)

@@ -125,7 +125,7 @@ def _embed(name: str, x: np.ndarray) -> np.ndarray:
 def _knn(X: np.ndarray, k: int, rng) -> np.ndarray:
     """The ``k`` nearest neighbours (M, k) of each row of ``X`` (M, D), itself excluded, in any order
     (the smoother averages them); computed in blocks of rows, so memory stays near 2**22 distances
-    whatever M (a whole M x M matrix was 0.8 GB for 10,000 held-out samples, its tie-breaking
+    whatever M (a whole M x M matrix would be 0.8 GB for 10,000 held-out samples, its tie-breaking
     noise as much again)."""
     m = len(X)
     rows = max(1, 2**22 // max(m, 1))

@@ -6,8 +6,8 @@ end the refits of every accepted model on all samples. :class:`Fits` is what one
 same code wherever it runs); :class:`Runner` runs a list of them on the main process and on worker
 processes.
 
-**Why processes.** XLA:CPU runs one call of the calibration engine on about one core (an FTDCR v4
-calibration kept its process at 107-113 % CPU of this machine's 200 % in ``top``), so a second core idles through the loop.
+**Why processes.** XLA:CPU runs one call of the calibration engine on about one core, so on a machine
+with more cores the others idle through the loop.
 Threads cannot use it: two Python threads executing the engine at once deadlocked
 (``benchmarks/README.md``). Each worker is a process with its own copy of the :class:`Problem` (model,
 robot, data and blocks, pickled once at the start) and its own compiled programs. The main process
@@ -22,12 +22,11 @@ process compiles meanwhile: with the cache on, the worker loads it), then the fi
 sample (where the loop's fits run on their own rows, :meth:`Problem._fit_rows`). With the compilation
 cache on (``tension_zones._xla``), before the main process first runs the rod or the final refit it
 waits for the worker's job if that has started (and cancels it if not), and loads the worker's
-program instead of compiling its own (on this 2-core machine a compile takes 10-15 s). Without a
+program instead of compiling its own (a compile is a large part of a small calibration). Without a
 worker (a small recording), a spare core still compiles the rod's program where the first round will
 score it for sure (the model carries a load from the start): the main process traces and lowers it,
 then XLA compiles it on a thread (:meth:`Problem.compile_ahead`) while the main process traces,
-compiles and fits the constant-curvature model (the 500-sample ``unknown_a_3w`` set with an empty
-cache, one run after the other: 12.24-12.50 s -> 10.82-10.91 s wall). Likewise the final refit's
+compiles and fits the constant-curvature model, which shortens the run's wall time. Likewise the final refit's
 program, once the first fit has run, where it is another (:meth:`Runner.ahead`). Only programs the
 loop will run: a compile still running at the end is waited for.
 
@@ -52,10 +51,9 @@ import numpy as np
 #: independent fits, and each worker holds its own programs: ~0.7 GB for the FTDCR v4 robot).
 MAX_WORKERS = 4
 #: ... for problems of at least this many samples x segments: a worker costs a process start and
-#: loading its programs (~5 s of a core), which a small problem's fits do not win back. Measured on
-#: this 2-core machine, compilation cache filled, one run after the other: FTDCR v4 (2063 samples x 3
-#: segments) 317.2 s without a worker, 229.9 s with one; the 500-sample single-segment set 12.3 s
-#: without, 14.8 s with (benchmarks/README.md).
+#: loading its programs, which a small problem's fits do not win back (a worker shortens the FTDCR v4
+#: calibration, 2063 samples x 3 segments, and lengthens the 500-sample single-segment one;
+#: benchmarks/README.md).
 MIN_WORK = 1024
 #: The loop's short refits, in Levenberg-Marquardt passes.
 SCREEN_ITERATIONS = 6

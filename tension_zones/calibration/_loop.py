@@ -39,8 +39,8 @@ For any robot (one segment or many) and any reader:
    floor) with a significant drop for all its parameters. Far above the floor the excess is the sum of
    many missing effects, and several small real ones can each fall short of the share: on FTDCR v4 the
    wires' drift, the geometry and the routing twist explain 8.2, 9.4 and 14.3 % of it one after the
-   other (the first two short of the 11.3-11.7 % one needs there), 28.7 % together (validation
-   5.78 -> 4.29 mm). Report the
+   other (the first two short of the 11.3-11.7 % one needs there), 28.7 % together (the validation
+   error falls with them). Report the
    error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
    before the selection is over.
@@ -49,8 +49,8 @@ For any robot (one segment or many) and any reader:
    reported parameters, their deviations and the prediction of a validation file are this fit's, the
    held-out errors and the structure test the training part's fit's, which never saw those samples.
    Where a validation file is given, every accepted model of the effect-by-effect steps is refitted
-   so too. Measured on FTDCR v4 (the same effects chosen): validation 6.592 -> 6.150 mm (aligned
-   6.293 -> 5.904 mm). Where the loop's fits run on their own rows (large recordings:
+   so too (on FTDCR v4 the same effects are chosen and the validation error is lower). Where the
+   loop's fits run on their own rows (large recordings:
    :meth:`Problem._fit_rows`), this refit has more rows and runs one more program.
 
 The fits of one step that do not depend on each other (a round's short and full refits, the backward
@@ -415,7 +415,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             significant = [s for s in scores if s["score"] > z_crit]
             # the score test is first order: an effect whose parameters act nonlinearly once the others
             # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
-            # critical 3.7, held-out 0.240 -> 0.082 mm, the noise floor, after a short refit) can explain
+            # critical 3.7, yet a short refit takes the held-out error to the noise floor) can explain
             # far more than its score says. Where no score is significant but the held-out error is more
             # than ``EXCESS_RATIO`` times the noise floor and its residual not noise (the final flag's
             # test: structure along an input, an offset, or a clear excess), every candidate with a
@@ -446,9 +446,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 # a candidate whose short refit does not lower the held-out error by a quarter of the drop
                 # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
                 # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
-                # refits (three of them the rod's, 35-50 s each), each of which failed its test where an
-                # earlier version ran it; every candidate screened out there had a higher held-out error
-                # after its short refit than before
+                # refits (three of them the rod's, the costliest), each of which fails its test when run;
+                # every candidate screened out there has a higher held-out error after its short refit
+                # than without it
                 for s in significant:
                     s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
                     s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
@@ -589,7 +589,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # constant curvature leaves the rod nothing to explain, 1.10x the floor with structure left,
             # where the weight's branch ends at 1.00x with the three effects the robot has.) The branch
             # is given up as soon as it is behind after a round (on FTDCR v4 after its first: the
-            # weight's branch there ended 0.003 mm above the tip force's, and running it out took 60 s)
+            # weight's branch there ends 0.003 mm above the tip force's, and running it out costs rounds)
             before, tried_t, runner, info = ties[0]
             k = info["round"]
             say(f"look-ahead: round {k} again, with {runner}")

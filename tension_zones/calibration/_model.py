@@ -83,7 +83,7 @@ def elapsed_hours(data: Dataset, clock=None) -> np.ndarray:
 @jax.jit
 def _declared(robot: Robot) -> dict:
     """``robot.params()`` with no curvature freedom (see :class:`RobotModel`): one small program (run
-    eagerly, its operations compiled one at a time, some 15 of them, 0.3-0.5 s in every process)."""
+    eagerly, its operations would be compiled one at a time, some 15 of them, in every process)."""
     phys = robot.params()
     phys["curvature_freedom"] = jnp.zeros_like(phys["curvature_freedom"])
     phys["bending_friction"] = jnp.zeros_like(phys["EI"])  # none declared: an effect (bending_friction)
@@ -152,8 +152,8 @@ class RobotModel:
         ``state`` (:meth:`start`, or a previous prediction's ``"state"``: each sample's equilibrium
         and the load curvature its solve learnt) the solves start there, and the result has the new
         ``"state"`` too: a fit's next pass, at nearby parameters, then takes fewer Newton iterations
-        (FTDCR v4, loaded, parameters 1e-3 apart: within 2e-13 after 4-5 iterations instead of 8-9;
-        from the equilibrium alone, without the curvature, 5-6)."""
+        (about half as many as a cold solve; the learnt curvature is part of the gain, the
+        equilibrium alone gives less)."""
         st = self.structure
         loaded = self.loaded(phys, inputs)  # one flag for all samples (outside the vmap)
         s0 = self.start(inputs["q"].shape[0], inputs["q"].dtype) if state is None else state

@@ -124,19 +124,11 @@ def _optimised(spec) -> bool:
     """Whether the engine's program for ``spec`` is worth LLVM's optimisation (level 3, else 0).
 
     Not the rod variant of a one-segment robot. The loop scores the rod in its first round (a few
-    short fits) and on one segment rarely fits it further; its program took 3.5 s to compile alone
-    (1.8 s at level 0), and 4.7-5.3 s beside the constant-curvature one, which waited for a core.
-    Measured on this 2-core machine with an empty cache, this program at level 0 against 3, every
-    result the same (the constant-curvature program at level 0 as well was slower on the larger sets):
-    * the CLI on the 500-sample ``unknown_a_3w`` set, from the process's start to the report written:
-      8.7 / 8.8 s against 10.3 / 10.3 s; with the cache filled 3.5-3.7 s against 3.3-3.4 s;
-    * ``calibrate`` with a validation file on sets of the tests' generator, one segment under its
-      weight (the truth of ``test_a_single_rod_segment_under_its_weight_is_named_a_rod``): 224, 992
-      and 1952 samples 8.2 / 11.5 / 14.8 s against 10.0 / 13.2 / 15.6 s. The price is paid where the
-      rod is named and refitted (480 samples): 12.5-13.1 s against 12.0-12.6 s, and with the cache
-      filled 6.3 / 6.4 s against 4.0 / 4.0 s.
-    Two segments keep level 3: on a 350-sample set whose rod is fitted (a tip force), 24.3 / 24.5 s
-    with the rod's program at level 0 against 18.2 / 18.4 s."""
+    short fits) and on one segment rarely fits it further, so its program's compile (about half as
+    long at level 0, and competing for a core with the constant-curvature one's) outweighs its run:
+    level 0 shortens a calibration from an empty cache, every result the same, and costs only where
+    the rod is named and refitted. The constant-curvature program stays at level 3 (at level 0 it was
+    slower on the larger sets), and so do two segments' rods, which are fitted further."""
     structure = getattr(spec.model, "structure", None)
     return not (getattr(structure, "pieces", 1) > 1 and getattr(structure, "n_segments", 0) == 1)
 
@@ -153,7 +145,7 @@ def _program(spec, args):
 
 def engine(spec, *args):
     """:func:`_engine`, compiled once per model and shapes (``fast_compile_options``) and kept on disk
-    before tracing (``_xla.stored_program``: a later process skips its 2.5-3.5 s trace). The stored
+    before tracing (``_xla.stored_program``: a later process skips its trace). The stored
     program's key holds the spec (its repr: the model's static structure and the blocks) and the
     sources of any block or model class defined outside the package; one defined where it has no
     file (a notebook) is traced in every process. A program being compiled on a thread
@@ -218,16 +210,16 @@ def compilations() -> int:
 
 
 #: A fit stops when an accepted step lowers the cost by less than this, relative. The loop's decisions
-#: resolve 1 % of the held-out RMSE; measured on the FTDCR v4 robot, 1e-5 against 1e-7: the same
-#: decisions in every round, held-out and validation RMSE within 0.006 mm, 671 LM iterations instead
-#: of 900 (the rod's full refits 12-24 instead of 40: 1e-7 ran most full fits to their limit).
+#: resolve 1 % of the held-out RMSE; on the FTDCR v4 robot a tighter 1e-7 makes the same decisions
+#: in every round, the held-out and validation RMSE within 0.006 mm, but runs most of the rod's full
+#: refits to their iteration limit.
 FIT_TOL = 1e-5
 
 #: Fits of a recording of at least this many (padded) samples that weigh at most this share of them
 #: evaluate only the weighted ones (evaluations then run that program in pieces of the samples:
 #: :meth:`Problem._evaluate`). Every fit pass costs its rows, and a loop has at most two row counts
 #: either way (its training fits', its refits' on every sample of the data file): the refits of
-#: FTDCR v4 with its validation file (1620 of 2063 samples) run on 1664 rows instead of 2176.
+#: FTDCR v4 with its validation file (1620 of 2063 samples) run on 1664 rows, not 2176.
 FIT_ROWS_MIN = 1024
 FIT_ROWS_SHARE = 0.9
 

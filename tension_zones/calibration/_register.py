@@ -5,7 +5,7 @@ by local steps from the identity, so a tracker mounted far from the robot's base
 land them in a wrong minimum. Before the loop, the rigid transform that best maps the nominal model's
 predicted tips (base frame) onto the measured ones is found in closed form (Kabsch/Umeyama, a proper
 rotation), and the recording is moved into the robot's base frame with it; the loop then fits the
-small remainder as before. Every step is equivariant (a rigid motion of the measurements moves the
+small remainder by its local steps. Every step is equivariant (a rigid motion of the measurements moves the
 transform with it and leaves the moved recording the same), so where the tracker is does not change
 what the loop sees.
 

@@ -37,9 +37,8 @@ def _pyplot():
     return plt
 
 
-#: Fixed margins (the figures' sizes and labels are fixed): ``tight_layout`` drew every figure an
-#: extra time to measure them (500-sample set, three runs each: the residual plots 1.45-1.61 s with
-#: it, 1.09-1.54 s without; the paths plot 0.43-0.58 s, 0.31-0.43 s).
+#: Fixed margins (the figures' sizes and labels are fixed): ``tight_layout`` would draw every figure
+#: an extra time to measure them.
 _RESIDUAL_GRID = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.87, "wspace": 0.06, "hspace": 0.16}
 _PATHS_GRID = {"left": 0.06, "right": 0.99, "bottom": 0.08, "top": 0.95, "wspace": 0.22, "hspace": 0.3}
 

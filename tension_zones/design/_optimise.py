@@ -255,8 +255,7 @@ def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool =
     """(smooth objective for gradients, exact objective, exact pieces).
 
     Traced in the compact forms (:func:`~tension_zones._numerics.compact_programs`): the optimiser's
-    program takes far longer to compile than to run (default scenario, four wires: the first run
-    32.0 s and a second 1.2 s in the unrolled forms, 17.2 s and 1.4 s in the compact ones).
+    program takes far longer to compile than to run, and the compact forms compile faster.
     """
     with compact_programs():
         dp, defl, ok, (shortfall, violations, min_spread) = _grid_terms(design, task, with_defl)
@@ -288,8 +287,8 @@ def _span(sc: Scenario) -> float:
     return min(float(sc.delta[-1] - sc.delta[0]), 2 * math.pi)
 
 
-#: :func:`spread` as one program per wire count: run op by op it compiled each of its operations
-#: (4-5 s per wire count for a handful of values)
+#: :func:`spread` as one program per wire count: run op by op it would compile each of its
+#: operations, for a handful of values
 _spread_jit = jax.jit(spread)
 
 
@@ -394,9 +393,8 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
 
         # one pass more than the steps: it ranks the last step's result (its update goes unused), and
         # the best iterate's pieces ride along, so the program holds one copy of the objective and
-        # nothing else compiles it (a copy to rank the last step and the objective's own program for
-        # the best's pieces cost about 4.4 and 4.9 s of trace and compile per wire count: notebook
-        # 04's scenario, 4 wires)
+        # nothing else compiles it (a copy to rank the last step, or the objective's own program for
+        # the best's pieces, would each cost another trace and compile per wire count)
         out0 = jax.eval_shape(lambda z: loss(z, sharp0)[1][1], z)
         init = (z, state, jnp.asarray(jnp.inf), jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), out0))
         (_, _, best, best_out), hist = jax.lax.scan(step, init, jnp.arange(steps + 1))
@@ -407,7 +405,7 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
 
 @functools.partial(jax.jit, static_argnames=("S", "n", "n_gaps"))
 def _initial(key, S: int, n: int, n_gaps: int) -> dict:
-    """``S`` starts' unconstrained variables (one program: run op by op, about 1 s per wire count)."""
+    """``S`` starts' unconstrained variables (one program: run op by op, each operation would compile alone)."""
     k1, k2, k3, k4 = jax.random.split(key, 4)
     z = {
         "r": jax.random.uniform(k1, (S,)),

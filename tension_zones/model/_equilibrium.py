@@ -37,11 +37,9 @@ a 2454 N mm^2, 60 mm backbone) and, kept, it would make a preloaded straight rob
 ring of equal minima (``|b|`` has a cone at ``b = 0``). The shortening is frozen at the iterate within
 a Newton step (a constant in ``V``, whose own step is taken): a fixed point on the shortening, which
 contracts by about ``c / r`` a step. Its part of ``dF/dx`` (:meth:`_Sample.clearance_matrix`) enters
-only the implicit derivative. In the step's LU solve (as friction's part is) it converged in fewer
-iterations, but its mere presence in that branch made every rod solve without clearance about 12 %
-slower (1000 FTDCR v4 samples, 4 pieces, interleaved runs: 58-62 against 52-58 us a sample; now
-54-58, as before the clearance), and the solves with it were slower too (one run each: 153 against
-136 us; 26 against 24 us at constant curvature).
+only the implicit derivative. In the step's LU solve (as friction's part is) it would converge in
+fewer iterations, but its mere presence in that branch makes every rod solve slower, those without
+clearance included, and the solves with clearance too.
 
 **Compression of the backbone.** The wires' tension shortens each piece's backbone by ``a_i`` (mm/N,
 ``axial_compliance`` per segment spread over its pieces) times the tension of the wires that cross it,
@@ -534,8 +532,8 @@ def _newton(sm: _Sample, x0, HL0):
         # backtracking: the largest of ``_STEPS`` with Armijo's decrease (with a round-off allowance,
         # so converged steps are not rejected by noise in V), tried from the largest down; under a
         # vmap over samples it runs until every sample has its step, which near the equilibrium is
-        # the first (with the load's gradient computed once per step, a cold FTDCR v4 solve of 1216
-        # loaded samples took 0.103 s instead of 0.175 s with all ten evaluated at once)
+        # the first (so the load's gradient is computed once per step, not for all ten step sizes at
+        # once, which costs more on loaded samples)
         def more(c):
             return (c[0] < steps.shape[0]) & ~c[1]
 

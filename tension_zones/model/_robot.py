@@ -81,10 +81,8 @@ class Structure:
 # --------------------------------------------------------------------------------------------
 #: Chains of up to this many links (segments, or pieces of the rod model) are unrolled: the fastest to
 #: run. Longer ones are vectorised and composed by a ``scan``, which compiles to the size of one link
-#: (the FTDCR v4 rod, 12 pieces: its calibration program's first evaluation 38.6 s -> 16.6 s; one
-#: segment in 4 pieces: trace, lowering and compile 14.1 s -> 11.2 s, a 500-sample calibration no
-#: slower). The FTDCR v4 constant-curvature chain of 3 evaluated in 0.42 s as a scan against 0.32 s
-#: unrolled (one measurement on this shared machine): it stays unrolled.
+#: (a rod of many pieces compiles much faster that way and runs no slower); a chain of three (the
+#: constant-curvature model of a three-segment robot) runs faster unrolled, so it stays unrolled.
 CHAIN_UNROLL_MAX = 3
 
 

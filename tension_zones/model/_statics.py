@@ -96,11 +96,11 @@ def _free_sets(n: int) -> np.ndarray:
 
 
 #: Up to this many candidate free sets (``2^n``: n <= 4 wires) the set choice is unrolled (fast to run,
-#: slower to compile, and much slower beyond: 30 s for 8 wires); above it is vectorised over the sets.
+#: slower to compile, and much slower to compile beyond); above it is vectorised over the sets.
 _UNROLL_MAX_SETS = 16
 #: Up to this many wires the free set is chosen among all 2^n subsets (exact for any ``A``); above
-#: it among the O(n^2) runs of wires of :func:`_arc_free_mask` (2^n is 81 s per 16k-pose chunk at
-#: 16 wires and 4e9 sets at 32).
+#: it among the O(n^2) runs of wires of :func:`_arc_free_mask` (2^n grows too fast: 65536 sets at
+#: 16 wires and 4e9 at 32).
 MAX_SUBSET_WIRES = 8
 
 

@@ -36,9 +36,9 @@ NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotatio
 #: Not candidates either: in the base frame the offset is part of the registration.
 EXCLUDED = {"base": ("offset",), "tracker": ()}
 #: Candidates only where asked for (``library(frame, opt_in=...)``, the CLI's ``--effects +NAME``): a
-#: model with the bending's memory solves the whole recording at every evaluation. On FTDCR v4 the loop
-#: names it (held out 3.66 -> 3.44 mm) but the CLI took 382 s against 86 s (the rod beside it, which the
-#: loop scores every round there, compiles for about 60 s and costs 18 s a short refit).
+#: model with the bending's memory solves the whole recording at every evaluation, so a calibration
+#: that scores it (beside the rod, which the loop scores every round on a multi-segment robot) takes
+#: several times as long, for a small gain where the loop names it.
 OPT_IN = ("bending_friction",)
 BY_NAME = {e.name: e for e in ALL}
 

@@ -35,11 +35,9 @@ class VariableCurvature(Effect):
         # The tip error against the Kirchhoff rod (tests/reference_rod.py) of a bent 60 mm segment
         # falls as 1/m^2: under a lateral weight of 0.003 N/mm 0.040 / 0.018 mm with m = 4 / 6, with a
         # 0.4 N lateral tip force as well 0.20 / 0.090 mm (model/README.md), against a tracker's
-        # 0.05 mm. On one or two segments 6 pieces make a rod fit's pass about 1.6x as long (an
-        # 850-sample two-segment set: 0.42 against 0.26 s, its calibration 16-31 s against 9-17 s
-        # with the cache filled), a 500-sample single-segment set's first run 0.2-0.3 s longer. Three
-        # segments keep 4: FTDCR v4, whose loop scores the rod every round, took 125 s with 6, 90 s
-        # with 4, against a target of 120 s
+        # 0.05 mm. On one or two segments 6 pieces make a rod fit's pass about 1.6x as long, which
+        # such a calibration affords. Three segments keep 4: there the loop scores the rod every
+        # round, and 6 pieces would take the calibration over its time budget
         return 6 if model.structure.n_segments <= 2 else 4
 
     def bounds(self, model, phys0):
