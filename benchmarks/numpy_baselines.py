@@ -1,6 +1,6 @@
 """Independent NumPy/SciPy implementations the benchmarks compare the JAX path against.
 
-Written from MODEL.md (Sec. 1-4) without importing tension_zones, the way a MATLAB-style user would:
+Written from tension_zones/MODEL.md (Sec. 1-4) without importing tension_zones, the way a MATLAB-style user would:
 * :func:`measures_loop`: one pose at a time, ``numpy.linalg.pinv``/``svd`` and the paper's literal
   ``Q`` matrix of all ``3^n`` joint-error vectors (Eqs. 17-19);
 * :func:`measures_vectorised`: the same numbers, batched over poses with stacked ``numpy.linalg``
@@ -20,7 +20,7 @@ TOL = 1e-9
 
 
 def jacobians(L, r, alpha, theta_L, delta):
-    """J_xpsi (6, 2) and J_qpsi (n, 2) at one pose (MODEL.md Sec. 1)."""
+    """J_xpsi (6, 2) and J_qpsi (n, 2) at one pose (tension_zones/MODEL.md Sec. 1)."""
     T = theta_L - np.pi / 2
     s, c = np.sin(theta_L), np.cos(theta_L)
     A = T * c - s + 1
@@ -108,7 +108,7 @@ def _slsqp_tensions(Jq, rhs, f_min):
 
 def compliance_scipy_loop(L, r, alpha, EI, k_w, thetas, deltas, wrench, f_min=0.0, h=1e-6,
                           stiffness=True):
-    """Per pose (MODEL.md Sec. 4; paper Eqs. 23-31 in psi): the tensions by SLSQP, then
+    """Per pose (tension_zones/MODEL.md Sec. 4; paper Eqs. 23-31 in psi): the tensions by SLSQP, then
     ``K_psi = hess U + d(J_qpsi^T tau)/dpsi - d(J_xpsi^T w)/dpsi + k_w J~^T J~`` (the two derivative
     terms by central differences of the analytic Jacobians) and the deflection ``dx = J_xpsi
     K^{-1} J_xpsi^T w`` for all wires ("full") and the taut ones (``tau_k > 1e-6 max tau``, "reduced").

@@ -178,7 +178,7 @@ def cmd_optimize(args) -> None:
 
 # ---- sweep: workspace performance maps ------------------------------------------------
 def _kinematics_measure(args):
-    """MODEL.md Sec. 3 measures, full and reduced: ``(per-pose function, extra args)``."""
+    """tension_zones/MODEL.md Sec. 3 measures, full and reduced: ``(per-pose function, extra args)``."""
     from .analysis._metrics import pose_metrics
 
     return pose_metrics, (args.dq,)
@@ -417,12 +417,12 @@ def _add_examples_parser(sub) -> None:
 
 def _add_calibrate_parser(sub) -> None:
     c = sub.add_parser("calibrate", help="fit a robot to tracker data, find and add missing effects")
-    c.add_argument("data", help="measurement CSV (MODEL.md Sec. 6, or the OpenCR format with --format opencr)")
+    c.add_argument("data", help="measurement CSV (tension_zones/MODEL.md Sec. 6, or the OpenCR format with --format opencr)")
     c.add_argument("--design", required=True,
                    help="design JSON: one segment, or {\"segments\": [...]} for several")
     c.add_argument("--out", required=True, help="output folder (report.json, report.md, plots)")
     c.add_argument("--format", choices=("model", "opencr"), default="model",
-                   help="the data files' reader: model (MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
+                   help="the data files' reader: model (tension_zones/MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
                         "servo_<id>_mm recordings)")
     c.add_argument("--validate", help="a second recording of the same robot, only predicted after the selection")
     c.add_argument("--effects", help="candidate effects, comma-separated (default: the library but for the opt-in "

@@ -57,7 +57,7 @@ its load resultants; coarse solves under load continuation, then refinement to `
 
 API: :func:`solve_segment` (one segment), :func:`solve_rod` (segments in series, :class:`Segment`)
 -> :class:`RodSolution` (backbone curve, frames, loads, curvature, ``tip_position``,
-``tip_rotation``, ``residuals()``); :func:`constant_curvature_tip` (MODEL.md Sec. 1 closed form)
+``tip_rotation``, ``residuals()``); :func:`constant_curvature_tip` (tension_zones/MODEL.md Sec. 1 closed form)
 and :func:`planar_shooting` (a second code path, planar elastica by shooting) for the tests.
 
 Units: mm, N, N/mm, N mm, N mm^2, rad.
@@ -486,7 +486,7 @@ def solve_segment(
 # Closed forms and a second, planar code path (for the tests)
 # ------------------------------------------------------------------------------------------
 def constant_curvature_tip(length, bend, direction):
-    """MODEL.md Sec. 1 / 5: tip position and rotation of an arc of bending angle ``bend`` (rad)
+    """tension_zones/MODEL.md Sec. 1 / 5: tip position and rotation of an arc of bending angle ``bend`` (rad)
     toward base-frame direction ``direction`` (sigma, rad): ``delta = -sigma``,
     ``p = (L/phi) [cos d (1 - cos phi), -sin d (1 - cos phi), sin phi]``,
     ``R = Rz(-d) Ry(phi) Rz(d)``."""

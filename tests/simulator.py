@@ -4,7 +4,7 @@ Its own code path on purpose: NumPy physics, SciPy's BFGS for the equilibrium (t
 damped Newton in JAX with implicit derivatives), a Python loop for path-dependent effects (the
 library scans), its own formulas for every effect (e.g. a single segment's friction as a linear tension
 factor where the library uses a capstan exponential, registration through SciPy's Rotation). A set is returned as the
-CSV text of MODEL.md Sec. 6 plus the declared design, and can be written to files.
+CSV text of tension_zones/MODEL.md Sec. 6 plus the declared design, and can be written to files.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ def _per_wire(v, n, default):
 
 
 def position(b, L):
-    """Tip position of a constant-curvature segment (MODEL.md Sec. 5), own implementation."""
+    """Tip position of a constant-curvature segment (tension_zones/MODEL.md Sec. 5), own implementation."""
     phi = np.hypot(b[0], b[1])
     if phi < 1e-6:
         k = L * (0.5 - phi**2 / 24.0)
@@ -445,7 +445,7 @@ class _Robot:
 
 
 def robot_patterns(design: dict, rng, val: bool = False, servos=None, steps: int = 10):
-    """(label, Q block) pairs, MODEL.md sign (negative = pulled in), commands from the *declared*
+    """(label, Q block) pairs, tension_zones/MODEL.md sign (negative = pulled in), commands from the *declared*
     kinematics: training = single-wire pulls (the others paid out) and each segment bent out and
     back in six directions, each ending in a hold (repeated commands); validation = every segment
     bent together, each in its own direction."""

@@ -166,7 +166,7 @@ def test_paths_and_the_wrong_reader_are_named(good, tmp_path):
     with pytest.raises(DataError, match="looks like an OpenCR recording .* use --format opencr"):
         read_csv(write_ocr(tmp_path), 3, 20.0)
     lines, _ = good
-    with pytest.raises(DataError, match="looks like a MODEL.md measurement set .* use --format model"):
+    with pytest.raises(DataError, match="looks like a tension_zones/MODEL.md measurement set .* use --format model"):
         read_opencr(write_tmp(lines))
     (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00\x01garbage")
     with pytest.raises(DataError, match="not UTF-8 text"):
@@ -204,7 +204,7 @@ def write_ocr(tmp_path, rows=ROWS, header=HEADER, name="ocr.csv"):
 def test_opencr_mapping_sign_order_and_groups(tmp_path):
     d = read_opencr(write_ocr(tmp_path), n_wires=3)
     assert d.servo_ids == (2, 1, 3) and d.frame == "tracker" and not d.f.any()
-    # tendon order and MODEL.md sign (negative = pulled in)
+    # tendon order and tension_zones/MODEL.md sign (negative = pulled in)
     np.testing.assert_allclose(d.q[0], [-0.5, 1.0, 1.0])
     np.testing.assert_allclose(d.q[3], [1.0, 1.0, -0.25])
     np.testing.assert_allclose(d.p[1], [3.0, 2.0, 187.0])

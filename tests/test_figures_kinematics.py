@@ -1,6 +1,6 @@
 """The Sec. 6.1 reproduce step: figures, summary keys, and the numbers against closed forms.
 
-Closed forms (small-bend structure, MODEL.md Sec. 5: wire displacements are linear in the bending
+Closed forms (small-bend structure, tension_zones/MODEL.md Sec. 5: wire displacements are linear in the bending
 vector b with rows r (cos alpha_k, sin alpha_k), and the tip rotation rate is |b_dot|): the
 orientation bound is the largest vertex norm of the zonogon pinv(A~) dq/r [-1, 1]^k, A~ the taut
 wires' unit rows. Three wires, two taut (rows 120 deg apart): 2 dq/r. Four wires, two taut (90 deg

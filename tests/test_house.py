@@ -135,3 +135,62 @@ def test_test_docstrings_say_what_is_tested_not_its_history():
     found += [f"{where}: {line}" for where, i, line in lines
               if i == 0 and re.match(r"(?i)(regression|issue \d+)\b", line)]
     assert found == []
+
+
+#: Text that names modules and files: the package's code (docstrings, comments, CLI help) and its
+#: pages (the READMEs, the model specification, the documentation site's own pages).
+def _named_in():
+    pkg = ROOT / "tension_zones"
+    pages = [p for p in sorted((ROOT / "docs" / "pages").rglob("*.md")) if not p.is_symlink()]
+    return sorted(pkg.rglob("*.py")) + sorted(pkg.rglob("*.md")) + [ROOT / "README.md"] + pages
+
+
+def test_every_module_named_in_code_and_pages_exists():
+    import importlib
+    import re
+
+    found = set()
+    for path in _named_in():
+        for name in re.findall(r"\btension_zones(?:\.[A-Za-z_]\w*)+", path.read_text()):
+            parts = name.split(".")
+            for k in range(len(parts), 0, -1):  # the longest module, then attributes
+                try:
+                    obj = importlib.import_module(".".join(parts[:k]))
+                except ImportError:
+                    continue
+                for attr in parts[k:]:
+                    obj = getattr(obj, attr, None)
+                if obj is None:
+                    found.add(f"{path.relative_to(ROOT)}: {name}")
+                break
+    assert sorted(found) == []
+
+
+#: Paths named as outputs or placeholders (``--out DIR``), not files of the repository.
+_NOT_FILES = {"report.md"}
+_PLACEHOLDERS = ("DIR/", "OUT/")
+
+
+def test_every_file_named_in_code_and_pages_exists():
+    """A path with a folder is looked for from the repository, the package, the naming file's folder
+    and the shipped examples (``example_path``; ``ex/`` is the README's copy of them); a bare
+    ``.py``/``.md``/``.ipynb`` name anywhere in the repository."""
+    import re
+
+    pattern = re.compile(r"(?<![\w./~$-])((?:[\w-]+/)*[\w.-]*\w\.(?:py|md|json|csv|ipynb|toml|yml|yaml|txt))\b")
+    names = {p.name for p in ROOT.rglob("*") if ".git" not in p.parts}
+    examples = ROOT / "tension_zones" / "examples"
+    found = set()
+    for path in _named_in():
+        for token in pattern.findall(path.read_text()):
+            if token in _NOT_FILES or token.startswith(_PLACEHOLDERS):
+                continue
+            if "/" not in token:
+                ok = not token.endswith((".py", ".md", ".ipynb")) or token in names
+            else:
+                local = token.removeprefix("ex/")
+                ok = any(p.exists() for p in (ROOT / token, ROOT / "tension_zones" / token, path.parent / token,
+                                              examples / local))
+            if not ok:
+                found.add(f"{path.relative_to(ROOT)}: {token}")
+    assert sorted(found) == []

@@ -1,4 +1,4 @@
-"""Kinematics against autodiff, finite differences and an integrated wire path (MODEL.md Sec. 1, 5)."""
+"""Kinematics against autodiff, finite differences and an integrated wire path (tension_zones/MODEL.md Sec. 1, 5)."""
 
 import jax
 import jax.numpy as jnp

@@ -1,6 +1,6 @@
-"""Performance measures (MODEL.md Sec. 3; paper Secs. 4, 6.1) against an independent NumPy reference.
+"""Performance measures (tension_zones/MODEL.md Sec. 3; paper Secs. 4, 6.1) against an independent NumPy reference.
 
-The reference below is written from MODEL.md alone: its own J_xpsi and J_qpsi, the taut rows by the
+The reference below is written from tension_zones/MODEL.md alone: its own J_xpsi and J_qpsi, the taut rows by the
 boundary rule, ``numpy.linalg.pinv`` of the taut rows only, ``numpy.linalg.svd``, and the paper's
 literal ``Q`` matrix with all ``3^n`` columns (Eqs. 17-19).
 """
@@ -39,7 +39,7 @@ def ref_measures(L, r, alpha, theta_L, delta, dq, reduced):
     dk = delta + np.asarray(alpha)
     n = dk.size
     Jq = r * np.stack([np.cos(dk), -T * np.sin(dk)], axis=1)
-    keep = np.cos(dk) > 1e-9 if reduced else np.ones(n, bool)  # MODEL.md Sec. 2 boundary rule
+    keep = np.cos(dk) > 1e-9 if reduced else np.ones(n, bool)  # tension_zones/MODEL.md Sec. 2 boundary rule
     P = np.linalg.pinv(Jq[keep]) if keep.any() else np.zeros((2, 0))
     out = {}
     for part, J in (("v", Jv), ("w", Jw)):
@@ -120,7 +120,7 @@ def test_uneven_angles_match_reference(angles):
 
 
 def test_boundary_directions_follow_the_model_rule():
-    """A wire exactly on the bending axis (|cos delta_k| <= 1e-9) is not taut (MODEL.md Sec. 2)."""
+    """A wire exactly on the bending axis (|cos delta_k| <= 1e-9) is not taut (tension_zones/MODEL.md Sec. 2)."""
     d, res = paper_sweep(3)
     deg = np.degrees(DE)
     for b in (30.0, 90.0, 150.0, 210.0, 270.0, 330.0):

@@ -1,7 +1,7 @@
 """Checks of the independent reference rod solver (tests/reference_rod.py) against known solutions.
 
 The reference is the yardstick for the package's rod model; here it is validated on its own:
-(a) tendon tensions only -> constant-curvature arcs (MODEL.md Sec. 1 and 5, one and three segments);
+(a) tendon tensions only -> constant-curvature arcs (tension_zones/MODEL.md Sec. 1 and 5, one and three segments);
 (b) tip force -> Euler-Bernoulli F L^3 / (3 EI) for a small load, the large-deflection elastica
     (elliptic-integral solution and Bisshopp & Drucker's published values) for a large one;
 (c) uniform weight -> w L^4 / (8 EI);
@@ -24,7 +24,7 @@ R3 = np.deg2rad([0.0, 120.0, 240.0])
 
 
 def arc_tip_sec5(length, b):
-    """MODEL.md Sec. 5: tip position and rotation vector of an arc with bending vector b = (u, v)."""
+    """tension_zones/MODEL.md Sec. 5: tip position and rotation vector of an arc with bending vector b = (u, v)."""
     u, v = b
     phi = np.hypot(u, v)
     c = length * (1 - np.cos(phi)) / phi**2
@@ -48,7 +48,7 @@ def test_tensions_only_single_segment_is_the_constant_curvature_arc(tendons):
     sol = rr.solve_segment(L, EI, R3, r, tau, tendons=tendons)
     # curvature vector toward the pulled tendons
     kv = (tau * r) @ np.stack([np.cos(R3), np.sin(R3)], axis=1) / EI
-    b = kv * L  # MODEL.md bending vector phi (cos sigma, sin sigma)
+    b = kv * L  # tension_zones/MODEL.md bending vector phi (cos sigma, sin sigma)
     p, w = arc_tip_sec5(L, b)
     np.testing.assert_allclose(sol.tip_position, p, rtol=0, atol=1e-8)
     np.testing.assert_allclose(rotvec(sol.tip_rotation), w, rtol=0, atol=1e-10)

@@ -100,7 +100,7 @@ def test_a_calibration_is_the_same_in_any_tracker_frame(tracker_set):
 
 
 def test_a_base_frame_recording_far_from_the_base_is_registered():
-    """A MODEL.md recording (declared in the base frame) whose positions are turned 150 deg and moved
+    """A tension_zones/MODEL.md recording (declared in the base frame) whose positions are turned 150 deg and moved
     half a metre: the frame is found, and the same effect (the wires' backlash) is named to the noise."""
     design = tz.Design.from_json(tz.example_path("synthetic/unknown_a_3w.design.json"))
     data = read_csv(tz.example_path("synthetic/unknown_a_3w.csv"))

@@ -61,7 +61,7 @@ def test_single_segment_jacobians_match_psi_coordinates():
 
 
 def _single_equilibrium_reference(d, q, f):
-    """MODEL.md Sec. 5 written out in NumPy and minimised by SciPy (an independent solver)."""
+    """tension_zones/MODEL.md Sec. 5 written out in NumPy and minimised by SciPy (an independent solver)."""
     L, r, a = float(d.length), float(d.pitch_radius), np.asarray(d.wire_angles)
     kw, EI, pre = float(d.wire_stiffness), float(d.backbone_EI), float(d.preload)
 

@@ -1,4 +1,4 @@
-"""Tension-only statics and compliance (MODEL.md Sec. 4-5): tension QP, stiffness, compliance."""
+"""Tension-only statics and compliance (tension_zones/MODEL.md Sec. 4-5): tension QP, stiffness, compliance."""
 
 import jax
 import jax.numpy as jnp
@@ -134,7 +134,7 @@ def test_K_psi_not_symmetric_for_a_fixed_moment():
 
 # ------------------------------------------------------------------------------ vs nonlinear
 def _nonlinear_tip(d, q, f, b0, push_pull):
-    """Minimise V(b) of MODEL.md Sec. 5 directly (Newton from b0); return (p, R, |grad V|) at b*."""
+    """Minimise V(b) of tension_zones/MODEL.md Sec. 5 directly (Newton from b0); return (p, R, |grad V|) at b*."""
     L, k, fp = d.length, d.wire_stiffness, d.preload
 
     def V(b):
@@ -153,7 +153,7 @@ def _fd_vs_compliance(d, th, de, f0, dw, eps):
     b0 = tz.psi_to_b(th, de)
     tau = S.tensions(d, th, de, f0).tau
     mask = S.taut_mask(d, tau)
-    # actuator commands that hold b0 with these tensions (MODEL.md Sec. 5)
+    # actuator commands that hold b0 with these tensions (tension_zones/MODEL.md Sec. 5)
     q = (tz.wire_lengths_b(d, b0) - d.length) + d.preload / d.wire_stiffness - tau / d.wire_stiffness
     slack = jnp.where(mask > 0, 0.0, 0.02)  # pull-only: slack wires get 0.02 mm of slack
     out = []
@@ -171,7 +171,7 @@ def _fd_vs_compliance(d, th, de, f0, dw, eps):
 
 @pytest.mark.parametrize("n,preload", [(3, 0.0), (4, 0.0), (3, 2.0)])
 def test_compliance_matches_nonlinear_equilibrium(n, preload):
-    """C_x dw against central differences of the pull-only energy minimum (MODEL.md Sec. 5);
+    """C_x dw against central differences of the pull-only energy minimum (tension_zones/MODEL.md Sec. 5);
     with push-pull wires (every wire a spring) against the traditional compliance."""
     d = _design(n, preload=preload)
     th, de = np.radians(65.0), np.radians(37.0)

@@ -1,4 +1,4 @@
-"""Tension zones, maps and the straight-through mask (MODEL.md Sec. 2; paper Sec. 3)."""
+"""Tension zones, maps and the straight-through mask (tension_zones/MODEL.md Sec. 2; paper Sec. 3)."""
 
 import jax
 import jax.numpy as jnp
@@ -22,7 +22,7 @@ def test_three_wire_taut_sets_of_the_paper(d3):
     assert taut(d3, 66.0) == (1, 3)
     assert taut(d3, 90.0) == (3,)  # wire 1 on the boundary: zero moment arm, not taut
     assert taut(d3, 20.0) == (1,) and taut(d3, 40.0) == (1, 3)
-    # one taut wire for |delta| < 30 deg, two in (30, 90) deg (MODEL.md Sec. 2)
+    # one taut wire for |delta| < 30 deg, two in (30, 90) deg (tension_zones/MODEL.md Sec. 2)
     for dd in np.arange(-29.5, 30.0, 0.5):
         assert taut(d3, dd) == (1,)
 

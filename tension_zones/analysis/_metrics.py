@@ -1,7 +1,7 @@
-"""Single-pose performance measures, full and reduced (MODEL.md Sec. 3; paper Secs. 4 and 6.1).
+"""Single-pose performance measures, full and reduced (tension_zones/MODEL.md Sec. 3; paper Secs. 4 and 6.1).
 
 Every function here is written for **one pose** ``(theta_L, delta)`` (rad) and is pure, so it can be
-``jit``-ed, ``vmap``-ed (:func:`tension_zones.over_grid`, :mod:`tension_zones.sweep`) and
+``jit``-ed, ``vmap``-ed (:func:`tension_zones.over_grid`, :mod:`tension_zones.analysis`) and
 differentiated. ``mask = None`` means the traditional (push-pull, "full") Jacobian; a 0/1 ``(n,)``
 mask keeps only the taut wires' rows (the reduced Jacobian, paper Sec. 3.3).
 
@@ -145,7 +145,7 @@ def _pose_inputs(design: Design, theta_L, delta, dq):
 
     The sines and cosines are kept (:func:`~tension_zones._numerics.keep`): otherwise XLA:CPU
     re-evaluates them inside the loop of each of the 17 outputs. Same formulas as
-    :func:`~tension_zones.kinematics.jacobians` and :func:`~tension_zones.tension_mask`.
+    :func:`~tension_zones.model.jacobians` and :func:`~tension_zones.tension_mask`.
     """
     theta_L, delta = _as_float(design, theta_L, delta)
     n = design.n_wires
@@ -335,7 +335,7 @@ def _check_concrete_pose(theta_L, delta, dq) -> None:
 # Public single-pose measures
 # --------------------------------------------------------------------------------------------
 def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
-    """Every measure of MODEL.md Sec. 3 at one pose, for one Jacobian (full or reduced).
+    """Every measure of tension_zones/MODEL.md Sec. 3 at one pose, for one Jacobian (full or reduced).
 
     Args:
         design: the segment.
@@ -369,7 +369,7 @@ def pose_metrics(design: Design, theta_L, delta, dq=DEFAULT_DQ):
     """Full and reduced measures at one pose, flat: ``{"n_taut", "<measure>_full", "<measure>_reduced"}``.
 
     The keys are those of the ``tension-zones sweep`` file (``kci_v_full``, ``dp_max_reduced``, ...);
-    ``n_taut`` is the number of wires in tension (MODEL.md Sec. 2, boundary rule included). The
+    ``n_taut`` is the number of wires in tension (tension_zones/MODEL.md Sec. 2, boundary rule included). The
     reduced mask carries the straight-through gradient of :func:`tension_zones.tension_mask`. NaN
     in, NaN out, as :func:`pose_measures` (``n_taut`` is -1 there).
     """

@@ -1,7 +1,7 @@
 """A generic, chunked, shardable sweep engine for per-pose measures.
 
 Any pure single-pose function ``fn(design, theta_L, delta, *args) -> dict[str, array]`` (e.g.
-:func:`tension_zones.metrics.pose_metrics`) is swept over a workspace grid (:func:`sweep_grid`) or a
+:func:`tension_zones.analysis.pose_metrics`) is swept over a workspace grid (:func:`sweep_grid`) or a
 flat list of poses (:func:`sweep_poses`):
 
 * **bounded memory**: poses are evaluated in fixed-size chunks by one compiled ``vmap`` (every

@@ -1,6 +1,6 @@
 """Closing the loop with measured data, for any robot (one segment or many).
 
-* :mod:`._data` - one :class:`Dataset`, readers for the MODEL.md CSV and the OpenCR CSV;
+* :mod:`._data` - one :class:`Dataset`, readers for the tension_zones/MODEL.md CSV and the OpenCR CSV;
 * :mod:`.effects` - the effect library (one module per effect);
 * :mod:`._model` - the robot as the loop sees it; :mod:`._problem` - a model plus effects as one
   parameter vector, fitted by the package's least-squares solver, compiled once;

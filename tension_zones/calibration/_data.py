@@ -1,4 +1,4 @@
-"""Measured data: one :class:`Dataset`, read from the MODEL.md Sec. 6 CSV or the OpenCR lab's CSV.
+"""Measured data: one :class:`Dataset`, read from the tension_zones/MODEL.md Sec. 6 CSV or the OpenCR lab's CSV.
 
 The edge of the calibration code: everything here is NumPy, and every problem is one line naming the
 file, the column and the row (``row`` = 1-based data row, the header not counted). Both readers share
@@ -7,10 +7,10 @@ bad-cell rules and ``drop_bad`` (isolated bad rows are dropped and listed instea
 
 Formats (the full description with examples is in ``tension_zones/calibration/README.md``):
 
-* ``model`` (MODEL.md Sec. 6): ``sample, q1..qn, fx, fy, fz, px, py, pz, rx, ry, rz``; positions in
+* ``model`` (tension_zones/MODEL.md Sec. 6): ``sample, q1..qn, fx, fy, fz, px, py, pz, rx, ry, rz``; positions in
   the robot's base frame; ``q`` in mm, negative = pulled in.
 * ``opencr`` (the OpenCR lab's recordings): ``timestamp, pattern_label, servo_<id>_mm..., tip_x,
-  tip_y, tip_z``; servo displacements positive = pulled in (converted to MODEL.md's sign), positions
+  tip_y, tip_z``; servo displacements positive = pulled in (converted to tension_zones/MODEL.md's sign), positions
   in the motion-capture frame; labels such as ``rep1_tendon4_id2_pull`` map servos to tendons.
 """
 
@@ -71,7 +71,7 @@ class DataError(ValueError):
 class Dataset:
     """Measurements in acquisition order; arrays have the sample axis first.
 
-    ``q`` (N, n) commanded wire displacements (mm, MODEL.md sign: negative = pulled in); ``f`` (N, 3)
+    ``q`` (N, n) commanded wire displacements (mm, tension_zones/MODEL.md sign: negative = pulled in); ``f`` (N, 3)
     known tip force (N, base frame); ``p`` (N, 3) measured tip position (mm); ``rot`` (N, 3) measured
     orientation (rotation vector, rad) or ``None``. ``frame``: ``"base"`` (positions in the robot's
     base frame, wire angles as designed) or ``"tracker"`` (an unregistered tracker frame, the wire
@@ -357,7 +357,7 @@ def _fmt(x) -> str:
 
 
 # --------------------------------------------------------------------------------------------
-# MODEL.md Sec. 6
+# tension_zones/MODEL.md Sec. 6
 # --------------------------------------------------------------------------------------------
 def _wire_columns(name: str, header: list[str]) -> list[str]:
     qs = sorted((c for c in header if re.fullmatch(r"q\d+", c)), key=lambda c: int(c[1:]))
@@ -377,7 +377,7 @@ def pattern_family(label: str) -> str:
 
 
 def read_csv(path, n_wires: int | None = None, length: float | None = None, drop_bad: bool = False) -> Dataset:
-    """Read and validate a MODEL.md Sec. 6 measurement set (positions in the base frame).
+    """Read and validate a tension_zones/MODEL.md Sec. 6 measurement set (positions in the base frame).
 
     Args:
         path: the CSV file.
@@ -470,13 +470,13 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     tendon 4 is driven by servo 2); ``servo_ids`` (tendon order) gives the map instead (a validation
     file takes its training file's). Tendon ``i`` belongs to segment ``i // n`` (proximal first) for
     ``n`` tendons per segment: the wire order of a :class:`~tension_zones.model.Robot`. Returned
-    ``q = -servo_mm`` (MODEL.md sign), no tip force, ``groups`` = the labels without ``_hold``.
+    ``q = -servo_mm`` (tension_zones/MODEL.md sign), no tip force, ``groups`` = the labels without ``_hold``.
     """
     path, header, body = _read_table(path)
     name = path.name
     servo_cols = {int(m.group(1)): h for h in header if (m := _SERVO.match(h))}
     if not servo_cols and any(re.fullmatch(r"q\d+", h) for h in header):
-        raise DataError(f"{name} looks like a MODEL.md measurement set (q1..qn columns): use --format model")
+        raise DataError(f"{name} looks like a tension_zones/MODEL.md measurement set (q1..qn columns): use --format model")
     for col in ("timestamp", "pattern_label", *TIP_COLS):
         if col not in header:
             raise DataError(f"{name}: missing column {col!r} (an OpenCR recording has timestamp, pattern_label, "

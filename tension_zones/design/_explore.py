@@ -35,14 +35,14 @@ FORMAT = "tension-zones exploration 1"
 # --------------------------------------------------------------------------------------------
 def _kinematic_pose(design: Design, theta_L, delta, dq):
     """:func:`~tension_zones.pose_metrics` at one pose, and whether it is controllable: at least two
-    wires taut, so that the taut wires alone span both configuration directions (MODEL.md Sec. 2; with
+    wires taut, so that the taut wires alone span both configuration directions (tension_zones/MODEL.md Sec. 2; with
     one, the reduced Jacobian has rank 1)."""
     m = pose_metrics(design, theta_L, delta, dq)
     return {**m, "controllable": m["n_taut"] >= 2}
 
 
 def _loaded_pose(design: Design, theta_L, delta, dq, wrench):
-    """:func:`_kinematic_pose` and the tension-only statics under ``wrench`` (MODEL.md Sec. 4)."""
+    """:func:`_kinematic_pose` and the tension-only statics under ``wrench`` (tension_zones/MODEL.md Sec. 4)."""
     return {**_kinematic_pose(design, theta_L, delta, dq), **compliance_pose(design, theta_L, delta, wrench)}
 
 

@@ -191,7 +191,7 @@ def _range_spread(design: Design, task: _Task):
     (the strict rule: every direction, zero width included).
 
     The spread is invariant to rotating all wires, so along delta it only changes where the taut
-    set does; at a boundary the boundary wire is slack (MODEL.md rule), the taut set is the
+    set does; at a boundary the boundary wire is slack (tension_zones/MODEL.md rule), the taut set is the
     intersection of its neighbours' and the spread their minimum. The minimum over the continuous
     range is therefore attained on this finite set: the check is exact, not just on grid points.
     """

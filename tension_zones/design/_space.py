@@ -32,7 +32,7 @@ from ..model._design import (
 from ._scenario import _err, _grid, _merge, _num, _wire_counts
 
 KIND = "space"
-#: The design fields a space can vary, by their design-file names (MODEL.md Sec. 6): the Design
+#: The design fields a space can vary, by their design-file names (tension_zones/MODEL.md Sec. 6): the Design
 #: field, the smallest value and whether it is excluded.
 FIELDS = {
     "length_mm": ("length", 0.0, True),

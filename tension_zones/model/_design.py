@@ -1,6 +1,6 @@
 """A continuum segment's design: a frozen pytree whose only static field is the wire count.
 
-Units: mm, N, N/mm, N mm^2, rad (MODEL.md, preamble). Every numeric field is a JAX array leaf, so
+Units: mm, N, N/mm, N mm^2, rad (tension_zones/MODEL.md, preamble). Every numeric field is a JAX array leaf, so
 changing a value (a new pitch radius, other wire angles) never triggers a recompile; changing
 ``n_wires`` does, because it fixes array shapes.
 """
@@ -42,7 +42,7 @@ def _is_concrete(x) -> bool:
 
 @dataclasses.dataclass(frozen=True, init=False, repr=False, eq=False)
 class Design:
-    """A single continuum segment with ``n_wires`` pull-only wires (MODEL.md Sec. 1).
+    """A single continuum segment with ``n_wires`` pull-only wires (tension_zones/MODEL.md Sec. 1).
 
     Args:
         n_wires: number of wires (static; at least 3: pull-only wires need three to bend the
@@ -155,7 +155,7 @@ class Design:
         return np.degrees(np.asarray(self.wire_angles))
 
     def to_dict(self) -> dict[str, Any]:
-        """The design-file form (MODEL.md Sec. 6): degrees and the file's key names."""
+        """The design-file form (tension_zones/MODEL.md Sec. 6): degrees and the file's key names."""
         return {
             "n_wires": self.n_wires,
             "length_mm": float(self.length),
@@ -168,7 +168,7 @@ class Design:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], warn_missing: bool = False) -> Design:
-        """Build from a design-file dictionary (MODEL.md Sec. 6).
+        """Build from a design-file dictionary (tension_zones/MODEL.md Sec. 6).
 
         Every error is one ``ValueError`` line naming the file's key and what it expects (an unknown
         key, a string, a bool or a fractional ``n_wires``, an entry of the wrong type). Keys that
@@ -237,7 +237,7 @@ class Design:
 
 jax.tree_util.register_pytree_node(Design, Design._tree_flatten, Design._tree_unflatten)
 
-#: Design-file keys (MODEL.md Sec. 6) -> :class:`Design` fields.
+#: Design-file keys (tension_zones/MODEL.md Sec. 6) -> :class:`Design` fields.
 _FILE_KEYS = {
     "n_wires": "n_wires",
     "length_mm": "length",

@@ -1,4 +1,4 @@
-"""The equilibrium of a robot under commanded wire displacements and loads (MODEL.md Sec. 5, chained).
+"""The equilibrium of a robot under commanded wire displacements and loads (tension_zones/MODEL.md Sec. 5, chained).
 
 One solver for every robot, one segment or many. A configuration is ``x = vec(B)`` (2S,), the
 segments' bending vectors. Commanded wire displacements ``q`` (N,) (negative = pulled in), a known
@@ -20,7 +20,7 @@ before the middle of piece ``i``. A pulled wire then bends its proximal pieces m
 ones, and a distal segment's wire loses tension to the bending of the proximal segments it crosses.
 The generalised force is ``F(x) = E x + sum_k k_k max(s_k, 0) (T_k * a_k) + (load)`` (``a_k`` the
 wire's row of the routing matrix, ``T_k`` its factors per piece). Without friction (``mu = 0``)
-``F = grad V`` and the problem is the energy minimisation of MODEL.md; with it, friction is not
+``F = grad V`` and the problem is the energy minimisation of tension_zones/MODEL.md; with it, friction is not
 conservative: ``T`` depends on ``x`` and ``F`` is no gradient. Within a Newton step, each wire's mean
 factor ``t_k`` stands in ``V``, and the rest of the friction force, ``sum_k tau_k (T_k - t_k) a_k``, is
 frozen at the iterate as a constant force (a linear term of ``V``): ``V``'s gradient there is ``F``,
@@ -784,7 +784,7 @@ def forward(robot: Robot, q, load: Load | None = None, pieces: int = 1):
 
 
 def wire_stretch(robot: Robot, B, q):
-    """``s_k = (l_k - l_k(0)) - q_k + f_pre / k_w``, (N,), mm (MODEL.md Sec. 5)."""
+    """``s_k = (l_k - l_k(0)) - q_k + f_pre / k_w``, (N,), mm (tension_zones/MODEL.md Sec. 5)."""
     return robot.wire_length_changes(B) - q + robot.preload / robot.wire_stiffness
 
 

@@ -1,4 +1,4 @@
-"""Constant-curvature kinematics of one segment (MODEL.md Sec. 1 and 5; paper Sec. 2).
+"""Constant-curvature kinematics of one segment (tension_zones/MODEL.md Sec. 1 and 5; paper Sec. 2).
 
 Every function here is written for **one pose** and is pure, so it can be ``jit``-ed, ``vmap``-ed
 over a grid (:func:`over_grid`) and differentiated. Frames: everything is expressed in the base
@@ -62,7 +62,7 @@ def b_to_psi(b):
 # Pose in psi coordinates
 # --------------------------------------------------------------------------------------------
 def tip_pose(design: Design, theta_L, delta):
-    """Tip position ``p`` (3,) in mm and orientation ``R`` (3, 3) in {B} (MODEL.md Sec. 1).
+    """Tip position ``p`` (3,) in mm and orientation ``R`` (3, 3) in {B} (tension_zones/MODEL.md Sec. 1).
 
     ``p = (L / phi) [cos d (1 - cos phi), -sin d (1 - cos phi), sin phi]``,
     ``R = Rz(-d) Ry(phi) Rz(d)``; smooth through the straight pose.
@@ -79,7 +79,7 @@ def wire_lengths(design: Design, theta_L, delta):
 
 
 def J_xpsi(design: Design, theta_L, delta):
-    """Analytic twist Jacobian ``xi = J_xpsi psi_dot``, (6, 2) (MODEL.md Sec. 1; paper Eq. 7).
+    """Analytic twist Jacobian ``xi = J_xpsi psi_dot``, (6, 2) (tension_zones/MODEL.md Sec. 1; paper Eq. 7).
 
     The ratios ``A/T^2``, ``(s - 1)/T`` and ``(T s + c)/T^2`` (``T = theta_L - theta_0``) are
     evaluated by series near ``T = 0`` so values and gradients are finite at the straight pose.
@@ -151,7 +151,7 @@ def J_xq(design: Design, theta_L, delta, mask=None):
 
 
 # --------------------------------------------------------------------------------------------
-# Bending-vector coordinates (MODEL.md Sec. 5)
+# Bending-vector coordinates (tension_zones/MODEL.md Sec. 5)
 # --------------------------------------------------------------------------------------------
 def tip_pose_b(design: Design, b):
     """Tip position (3,) and orientation (3, 3) from the bending vector ``b = (u, v)`` (rad).
@@ -165,7 +165,7 @@ def tip_pose_b(design: Design, b):
 
 def segment_pose(L, b):
     """End-disk position (3,) and rotation (3, 3) of a constant-curvature segment of length ``L`` (mm)
-    and bending vector ``b`` (2,), in the segment's base frame (MODEL.md Sec. 5).
+    and bending vector ``b`` (2,), in the segment's base frame (tension_zones/MODEL.md Sec. 5).
 
     The one formula of a segment's pose: :func:`tip_pose_b` and a robot's chain of segments use it.
     """
@@ -207,7 +207,7 @@ def segment_weight_moment_jacobian(L, b):
 
 def moment_arms(radius, angles):
     """``d l / d b`` of wires at ``angles`` (rad) on a pitch circle of ``radius`` (mm): ``-r [cos a, sin a]``,
-    shape ``angles.shape + (2,)``. Wire lengths are linear in ``b`` (MODEL.md Sec. 5)."""
+    shape ``angles.shape + (2,)``. Wire lengths are linear in ``b`` (tension_zones/MODEL.md Sec. 5)."""
     return -jnp.asarray(radius)[..., None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
 
 
@@ -253,7 +253,7 @@ def J_xb_cols(L, u, v, coeffs):
 def J_xb(design: Design, b):
     """Twist Jacobian in bending-vector coordinates, (6, 2): ``[p_dot; omega] = J_xb b_dot``.
 
-    Closed form of the derivative of :func:`tip_pose_b` (MODEL.md Sec. 5), with ``x = |b|^2`` and
+    Closed form of the derivative of :func:`tip_pose_b` (tension_zones/MODEL.md Sec. 5), with ``x = |b|^2`` and
     the coefficients of :func:`bend_coeffs`: ``dp/du = L (c + 2u^2 c', 2uv c', 2u s')``,
     ``dp/dv = L (2uv c', c + 2v^2 c', 2v s')``; ``omega = J_l(rho) rho_dot`` for the rotation vector
     ``rho = (-v, u, 0)``, with SO(3)'s left Jacobian ``J_l = I + c K + g K^2`` (``K = skew(rho)``):

@@ -1,4 +1,4 @@
-"""A robot: one or more constant-curvature segments in series (MODEL.md Sec. 5, chained).
+"""A robot: one or more constant-curvature segments in series (tension_zones/MODEL.md Sec. 5, chained).
 
 A :class:`Robot` is a chain of segments (:class:`~tension_zones.model.Design`), proximal first.
 Segment ``j`` has its own bending vector ``b_j = (u_j, v_j)``; a configuration is ``B``, shape
@@ -364,7 +364,7 @@ class Robot:
     def from_dict(cls, d: dict[str, Any], warn_missing: bool = False) -> Robot:
         """``{"segments": [segment, ...]}`` (proximal first) or a single-segment design dict.
 
-        A segment is a design dict (MODEL.md Sec. 6 keys). Segment ``j`` may add how its wires cross
+        A segment is a design dict (tension_zones/MODEL.md Sec. 6 keys). Segment ``j`` may add how its wires cross
         the proximal segments ``0 .. j-1``: ``route_angles_deg`` and/or ``route_radii_mm``, each a
         list with one entry per wire of the segment, every entry a list of ``j`` numbers (the wire's
         angle / pitch radius in segments 0, ..., j-1). Missing: the wire keeps its own angle and

@@ -1,12 +1,12 @@
-"""Tension-only statics and compliance of one segment (MODEL.md Sec. 4; paper Sec. 5 and 6.2).
+"""Tension-only statics and compliance of one segment (tension_zones/MODEL.md Sec. 4; paper Sec. 5 and 6.2).
 
-Single-pose, pure functions, lifted to grids with :func:`~tension_zones.kinematics.over_grid`.
+Single-pose, pure functions, lifted to grids with :func:`~tension_zones.model.over_grid`.
 Frames and units: the tip wrench ``w = [f; m]`` (N, N mm) and the twist-like deflection
 ``dx = [dp; dtheta]`` (mm, rad) are in the base frame {B}; tensions in N; stiffness in
 N mm / rad^2 (configuration space).
 
 Equilibrium (paper Eq. 23): ``J_xpsi^T w - grad U - J_qpsi^T tau = 0`` with pull-only wires
-``tau >= f_min``. The computation runs in the bending vector ``b = (u, v)`` (MODEL.md Sec. 5), where
+``tau >= f_min``. The computation runs in the bending vector ``b = (u, v)`` (tension_zones/MODEL.md Sec. 5), where
 ``J_qb = -r [cos alpha_k, sin alpha_k]`` is constant and nothing is singular at the straight pose.
 ``psi -> b`` is a diffeomorphism away from the straight pose, so the ``b``-form equilibrium
 ``J_qb^T tau = J_xb^T w - EI b / L`` is the psi-form multiplied by an invertible ``(d psi/d b)^T``,
@@ -42,7 +42,7 @@ from .._numerics import (
 from ._design import Design
 from ._kinematics import J_qb, J_qpsi, J_xb, J_xb_cols, J_xpsi, bend_coeffs, over_grid, psi_to_b
 
-#: A wire is taut when ``tau_k > TAUT_REL_TOL * max_j tau_j`` (MODEL.md Sec. 4, ``f_min = 0``).
+#: A wire is taut when ``tau_k > TAUT_REL_TOL * max_j tau_j`` (tension_zones/MODEL.md Sec. 4, ``f_min = 0``).
 TAUT_REL_TOL = 1e-6
 #: Relative KKT violation up to which a tension candidate is accepted (else: infeasible pose).
 KKT_TOL = 1e-9
@@ -288,7 +288,7 @@ def equilibrium_b(design: Design, b, wrench):
     """The equilibrium ``A tau = rhs`` in bending-vector coordinates at one pose.
 
     ``A = J_qb^T`` (2, n), ``rhs = J_xb^T w - grad_b U`` (2,), ``U = EI |b|^2 / (2L)``
-    (MODEL.md Sec. 4-5).
+    (tension_zones/MODEL.md Sec. 4-5).
     """
     w = as_wrench(wrench)
     A = J_qb(design, b).T
@@ -306,7 +306,7 @@ def tensions(design: Design, theta_L, delta, wrench) -> TensionSolution:
 
 
 def taut_mask(design: Design, tau):
-    """The statics taut set, (n,) 0/1 with a straight-through gradient (MODEL.md Sec. 4).
+    """The statics taut set, (n,) 0/1 with a straight-through gradient (tension_zones/MODEL.md Sec. 4).
 
     Without preload: ``tau_k > 1e-6 max_j tau_j``; with a preload every wire is taut.
     Gradient: that of ``sigmoid((tau_k / max tau - 1e-6) / STATICS_TEMPERATURE)`` (zero with a preload).
@@ -347,10 +347,10 @@ def _load_terms_b(design: Design, b, w):
     """``(J_xb (6, 2), d(J_xb^T w)/db (2, 2))`` at one pose, in closed form.
 
     ``J_xb^T w = [dp/du . f + omega_u . m, dp/dv . f + omega_v . m]`` (columns of
-    :func:`~tension_zones.kinematics.J_xb`). The force part is the Hessian of
+    :func:`~tension_zones.model.J_xb`). The force part is the Hessian of
     ``L (c (u f_x + v f_y) + s f_z)`` (``p . f``); the moment part differentiates ``omega_u . m``,
     ``omega_v . m``. Coefficients and their ``x2``-derivatives from
-    :func:`~tension_zones.kinematics.bend_coeffs` (series at the straight pose). Equal to nested
+    :func:`~tension_zones.model._kinematics.bend_coeffs` (series at the straight pose). Equal to nested
     forward-mode differentiation of ``J_xb`` (tested), at about a third of the work.
     """
     u, v = b[0], b[1]

@@ -1,10 +1,10 @@
-"""Tension transition zones, tension maps and reduced Jacobians (MODEL.md Sec. 2; paper Sec. 3).
+"""Tension transition zones, tension maps and reduced Jacobians (tension_zones/MODEL.md Sec. 2; paper Sec. 3).
 
 Wire ``k`` is in its tension zone when pulling it (``q_dot_k < 0``) moves the segment as asked. For
 the paper's default motion, bending further in a fixed plane (``psi_dot = [-1, 0]``), that is
 ``cos(delta_k) > 0`` with ``delta_k = delta + alpha_k``; for a general ``psi_dot`` the zones shift
 in phase (paper Figs. 3-4). A wire with a zero moment arm (``|cos delta_k| <= 1e-9``, or in general
-a normalised pull rate within ``1e-9`` of zero) is *not* taut (MODEL.md Sec. 2, boundary rule).
+a normalised pull rate within ``1e-9`` of zero) is *not* taut (tension_zones/MODEL.md Sec. 2, boundary rule).
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def tension_score(design: Design, delta, theta_L=None, psi_dot=None):
 def tension_mask(design: Design, delta, theta_L=None, psi_dot=None, temperature=TEMPERATURE):
     """Which wires are in tension, (n,) float 0/1, with a straight-through gradient.
 
-    Forward: exactly ``1.0`` where ``tension_score > 1e-9`` (MODEL.md boundary rule), else ``0.0``;
+    Forward: exactly ``1.0`` where ``tension_score > 1e-9`` (tension_zones/MODEL.md boundary rule), else ``0.0``;
     NaN where the score is (NaN inputs, an invalid design).
     Backward: the gradient of ``sigmoid(score / temperature)``, so design variables that move a
     wire across its zone boundary (wire angles, the bending direction) get a useful gradient.

@@ -12,7 +12,7 @@ deg step 2.5, reduced Jacobians unless "full" is said, dq = 0.4 mm unless a dq s
   (how much the traditional Jacobian underestimates the position uncertainty, at worst).
 * ``three_over_four_max[q]``: max over the grid of ``B3 / B4``, the bounds of the two designs at
   the same pose (``B`` = ``dp_max`` for q = position, ``dw_max`` for orientation), leaving out the zero-width directions where the
-  four-wire design has a single taut wire (delta = k 90 deg, MODEL.md boundary rule); the
+  four-wire design has a single taut wire (delta = k 90 deg, tension_zones/MODEL.md boundary rule); the
   unrestricted value is reported as ``three_over_four_max_all``.
 * ``sensitivity_three_over_four[q]``: ratio of the slopes (least squares over dq = 0.2..1.0 mm) of
   the workspace-maximal bound ``max_grid B(dq)``, three wires over four.
@@ -36,7 +36,7 @@ def paper_sweeps(dq_values=DQ_SWEEP, length=LENGTH, pitch_radius=PITCH_RADIUS, q
     """Sweep the three- and four-wire designs over the paper grid for every ``dq``.
 
     Returns ``(theta_deg, delta_deg, results)`` with ``results[(n, dq)]`` the dict of
-    :func:`tension_zones.metrics.pose_metrics` arrays, shape (18, 145).
+    :func:`tension_zones.analysis.pose_metrics` arrays, shape (18, 145).
     """
     from ..model._design import Design
     from ..analysis._metrics import pose_metrics
@@ -151,7 +151,7 @@ def measure_figure(theta_deg, delta_deg, r3, r4, name, label_v, label_w, fig_tit
     """Figs. 9/10 layout: rows translation/orientation; columns (a) traditional 3 wires,
     (b) reduced 3 wires, (c) reduced 4 wires, (d) reduced 3 minus 4 wires.
 
-    ``r3``, ``r4``: sweeps of :func:`tension_zones.metrics.pose_metrics`; ``name`` one of ``kci``,
+    ``r3``, ``r4``: sweeps of :func:`tension_zones.analysis.pose_metrics`; ``name`` one of ``kci``,
     ``sigma_min``, ``sigma_min_nz``. Saved to ``path`` (and closed) if given, else returned.
     """
     import matplotlib.pyplot as plt

@@ -29,7 +29,7 @@ from .wire_stiffness import WireStiffness
 ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
        RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Compression(), Drift(),
        BendingFriction(), Marker(), Geometry())
-#: Always fitted, by the frame of the data: positions in the robot's base frame (MODEL.md Sec. 6), or
+#: Always fitted, by the frame of the data: positions in the robot's base frame (tension_zones/MODEL.md Sec. 6), or
 #: in an unregistered tracker frame, whose origin and tilt are never known, nor which way each segment's
 #: wires point (the registration leaves the turn about the axis to the patterns' rotations).
 NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotation", "offset", "registration")}

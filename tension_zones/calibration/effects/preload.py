@@ -1,6 +1,6 @@
 """Per-wire preload (N) on top of the declared one: wire zero offsets and pretension.
 
-A preload ``f`` is the same as a zero offset ``f / k_w`` of the wire's displacement (MODEL.md Sec. 5:
+A preload ``f`` is the same as a zero offset ``f / k_w`` of the wire's displacement (tension_zones/MODEL.md Sec. 5:
 ``s = dl - q + f_pre / k_w``), so this effect also covers encoder zero errors and a segment's
 pretension.
 """
