@@ -21,7 +21,6 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-
 #: Jacobian columns pushed forward together (see ``n_cols``): forward mode costs about one model
 #: evaluation per column, so a group of 8 wastes at most 7 on padding.
 COL_GROUP = 8

@@ -8,7 +8,7 @@ import matplotlib
 
 if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
     try:  # headless by default; notebooks keep their inline backend
-        import IPython  # noqa: F401
+        import IPython
 
         if IPython.get_ipython() is None:
             matplotlib.use("Agg")
@@ -83,7 +83,7 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
             if not many:
                 ax.text(1.0 * np.cos(a) * 0.45, 1.0 * np.sin(a) * 0.45, f"{s.n_taut}",
                         fontsize=8, ha="center", va="center",
-                        bbox=dict(boxstyle="circle,pad=0.15", fc="white", ec="k", lw=0.6))
+                        bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": "k", "lw": 0.6})
     for k, (a, b) in enumerate(tmap.zones_deg):
         r_out = ring0 + (k + 1) * ring_w
         ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n),

@@ -31,13 +31,12 @@ for _flag in (fast_compile_flag(), _LEVEL_0):
     if _flag and _flag.split("=")[0] not in os.environ.get("XLA_FLAGS", ""):
         os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
 
-import jax  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import jax
+import numpy as np
+import pytest
+from hypothesis import settings
 
-import tension_zones as tz  # noqa: E402  (enables float64)
-
-from hypothesis import settings  # noqa: E402
+import tension_zones as tz
 
 settings.register_profile("ci", max_examples=40, deadline=None)
 settings.load_profile("ci")

@@ -250,7 +250,7 @@ class _Robot:
         self.n = [s["n_wires"] for s in segs]
         self.N = sum(self.n)
         self.owner = np.repeat(np.arange(self.S), self.n)
-        per = lambda v, d: np.full(self.N if d == "w" else self.S, 0.0) if len(v) == 0 else np.asarray(v, float)  # noqa: E731
+        per = lambda v, d: np.full(self.N if d == "w" else self.S, 0.0) if len(v) == 0 else np.asarray(v, float)
         L_seg = np.array([s["length_mm"] for s in segs]) + per(truth.d_length, "s")
         r_seg = np.array([s["pitch_radius_mm"] for s in segs])
         alpha = np.radians(np.concatenate([s["wire_angles_deg"] for s in segs]))

@@ -2,6 +2,7 @@
 the split belongs to the data."""
 
 import dataclasses
+import itertools
 
 import numpy as np
 import pytest
@@ -41,12 +42,14 @@ def test_good_file_loads(good):
     assert ds.n_samples == 60 and ds.n_wires == 3 and ds.dropped == ()
 
 
-def write_tmp(lines, _n=[0]):
+_WRITTEN = itertools.count(1)  # numbers the files write_tmp writes
+
+
+def write_tmp(lines):
     import tempfile
     from pathlib import Path
 
-    _n[0] += 1
-    p = Path(tempfile.mkdtemp()) / f"d{_n[0]}.csv"
+    p = Path(tempfile.mkdtemp()) / f"d{next(_WRITTEN)}.csv"
     p.write_text("\n".join(lines) + "\n")
     return p
 

@@ -17,23 +17,23 @@ def test_defaults_and_even_angles():
 @pytest.mark.parametrize(
     "kwargs, field",
     [
-        (dict(n_wires=2, length=20.0, pitch_radius=2.0), "n_wires"),
-        (dict(n_wires=3.0, length=20.0, pitch_radius=2.0), "n_wires"),
-        (dict(n_wires=3, length=0.0, pitch_radius=2.0), "length"),
-        (dict(n_wires=3, length=-1.0, pitch_radius=2.0), "length"),
-        (dict(n_wires=3, length=20.0, pitch_radius=0.0), "pitch_radius"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, wire_stiffness=0.0), "wire_stiffness"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, backbone_EI=-1.0), "backbone_EI"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, preload=-0.5), "preload"),
-        (dict(n_wires=3, length=float("nan"), pitch_radius=2.0), "length"),
-        (dict(n_wires=3, length=20.0, pitch_radius=float("inf")), "pitch_radius"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, wire_angles=[0.0, 1.0]), "wire_angles"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, wire_angles=[0.0, 1.0, 2 * np.pi]),
+        ({"n_wires": 2, "length": 20.0, "pitch_radius": 2.0}, "n_wires"),
+        ({"n_wires": 3.0, "length": 20.0, "pitch_radius": 2.0}, "n_wires"),
+        ({"n_wires": 3, "length": 0.0, "pitch_radius": 2.0}, "length"),
+        ({"n_wires": 3, "length": -1.0, "pitch_radius": 2.0}, "length"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 0.0}, "pitch_radius"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_stiffness": 0.0}, "wire_stiffness"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "backbone_EI": -1.0}, "backbone_EI"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "preload": -0.5}, "preload"),
+        ({"n_wires": 3, "length": float("nan"), "pitch_radius": 2.0}, "length"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": float("inf")}, "pitch_radius"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0]}, "wire_angles"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, 2 * np.pi]},
          "wire_angles"),
-        (dict(n_wires=3, length=20.0, pitch_radius=2.0, wire_angles=[0.0, 1.0, np.nan]),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, np.nan]},
          "wire_angles"),
-        (dict(n_wires=3, length="long", pitch_radius=2.0), "length"),
-        (dict(n_wires=3, length=[1.0, 2.0], pitch_radius=2.0), "length"),
+        ({"n_wires": 3, "length": "long", "pitch_radius": 2.0}, "length"),
+        ({"n_wires": 3, "length": [1.0, 2.0], "pitch_radius": 2.0}, "length"),
     ],
 )
 def test_validation_names_field_and_value(kwargs, field):
@@ -62,7 +62,7 @@ def test_pytree_static_wire_count_and_no_recompile():
     assert len(traces) == 1, "new values of the same shapes must not recompile"
     f(tz.Design(4, 20.0, 2.0))
     assert len(traces) == 2, "a new wire count is a new shape"
-    leaves, treedef = jax.tree_util.tree_flatten(tz.Design(5, 20.0, 2.0))
+    leaves, _treedef = jax.tree_util.tree_flatten(tz.Design(5, 20.0, 2.0))
     assert len(leaves) == 6 and all(isinstance(x, jax.Array) for x in leaves)
 
 

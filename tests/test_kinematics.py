@@ -37,7 +37,7 @@ def test_J_xpsi_matches_jacfwd(theta_L, delta):
 def test_J_xpsi_matches_finite_differences(theta_L, delta):
     d = _design()
     h = 1e-6
-    p = lambda t, dd: np.asarray(tz.tip_pose(d, t, dd)[0])  # noqa: E731
+    p = lambda t, dd: np.asarray(tz.tip_pose(d, t, dd)[0])
     fd = np.stack([(p(theta_L + h, delta) - p(theta_L - h, delta)) / (2 * h),
                    (p(theta_L, delta + h) - p(theta_L, delta - h)) / (2 * h)], axis=1)
     np.testing.assert_allclose(tz.J_xpsi(d, theta_L, delta)[:3], fd, atol=1e-7)
@@ -127,7 +127,7 @@ def test_J_xb_matches_chain_rule_and_is_finite(b):
     J = np.asarray(tz.J_xb(d, b))
     assert np.all(np.isfinite(J))
     h = 1e-6
-    p = lambda bb: np.asarray(tz.tip_pose_b(d, bb)[0])  # noqa: E731
+    p = lambda bb: np.asarray(tz.tip_pose_b(d, bb)[0])
     fd = np.stack([(p(b + h * e) - p(b - h * e)) / (2 * h) for e in np.eye(2)], axis=1)
     np.testing.assert_allclose(J[:3], fd, atol=1e-7)
     if float(jnp.linalg.norm(b)) == 0.0:
@@ -212,8 +212,8 @@ def test_over_grid_shapes():
 
 def _J_xb_by_autodiff(d, b):
     """Independent reference: forward-mode derivative of the Rodrigues tip pose, omega = vee(R_dot R^T)."""
-    p_of = lambda bb: tz.tip_pose_b(d, bb)[0]  # noqa: E731
-    R_of = lambda bb: tz.tip_pose_b(d, bb)[1]  # noqa: E731
+    p_of = lambda bb: tz.tip_pose_b(d, bb)[0]
+    R_of = lambda bb: tz.tip_pose_b(d, bb)[1]
     dp = jax.jacfwd(p_of)(b)
     dR = jax.jacfwd(R_of)(b)  # (3, 3, 2)
     W = jnp.einsum("ijk,lj->kil", dR, R_of(b))

@@ -47,7 +47,7 @@ def test_huber_loss_resists_outliers():
     rng = np.random.default_rng(1)
     y = np.asarray(Y) + 0.01 * rng.normal(size=20)
     y[[3, 11]] += 2.0  # two gross outliers
-    fun = lambda x: x[0] * jnp.exp(-x[1] * T) - y  # noqa: E731
+    fun = lambda x: x[0] * jnp.exp(-x[1] * T) - y
     ls, *_ = levenberg_marquardt(fun, jnp.asarray([1.0, 1.0]))
     hub, *_ = levenberg_marquardt(fun, jnp.asarray([1.0, 1.0]), huber=0.05)
     assert np.abs(np.asarray(hub) - [2.0, 1.5]).max() < 0.05 < np.abs(np.asarray(ls) - [2.0, 1.5]).max()

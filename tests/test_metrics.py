@@ -78,7 +78,7 @@ def assert_matches_reference(res, design, i, j, dq, rtol=1e-9):
             assert abs(got - want) <= rtol * scale, (mode, k, got, want, np.degrees(DE[j]))
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def paper_sweep(n, angles_deg=None, dq=0.4):
     angles = None if angles_deg is None else rad(angles_deg)
     d = tz.Design(n, 20.0, 2.0, wire_angles=angles)
@@ -139,7 +139,7 @@ def test_boundary_directions_follow_the_model_rule():
 
 
 def test_three_wire_zone_structure_and_ratios():
-    d, res = paper_sweep(3)
+    _d, res = paper_sweep(3)
     deg = np.degrees(DE)
     m = deg % 120.0  # one taut wire in (-30, 30) + 120 k, and on every zone end 30 + 60 k
     one = (m < 30.0) | (m > 90.0) | np.isclose(deg % 60.0, 30.0)

@@ -73,7 +73,7 @@ def _single_equilibrium_reference(d, q, f):
         s = -r * (u * np.cos(a) + v * np.sin(a)) - q + pre / kw
         return EI * (u * u + v * v) / (2 * L) + 0.5 * kw * np.sum(np.maximum(s, 0) ** 2) - f @ p
 
-    return minimize(V, np.array([0.1, 0.1]), method="BFGS", options=dict(gtol=1e-10)).x
+    return minimize(V, np.array([0.1, 0.1]), method="BFGS", options={"gtol": 1e-10}).x
 
 
 @pytest.mark.parametrize("q, f", [
@@ -91,8 +91,8 @@ def test_robot_from_dict_single_and_multi(tmp_path):
     single = {"n_wires": 3, "length_mm": 20.0, "pitch_radius_mm": 2.0}
     rob = ms.Robot.from_dict(single)
     assert rob.n_segments == 1 and rob.n_wires == 3
-    seg = dict(length_mm=60.0, n_wires=3, pitch_radius_mm=4.5, wire_angles_deg=[0, 120, 240],
-               backbone_EI_Nmm2=2454.0, wire_stiffness_N_per_mm=50.0, preload_N=0.5)
+    seg = {"length_mm": 60.0, "n_wires": 3, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240],
+               "backbone_EI_Nmm2": 2454.0, "wire_stiffness_N_per_mm": 50.0, "preload_N": 0.5}
     rob3 = ms.Robot.from_dict({"segments": [seg, dict(seg, length_mm=62.5), dict(seg, length_mm=64.0)]})
     assert rob3.n_wires_per_segment == (3, 3, 3)
     np.testing.assert_allclose(rob3.lengths, [60.0, 62.5, 64.0])
@@ -313,9 +313,9 @@ def test_vmapped_and_new_values_do_not_recompile():
 # ---------------------------------------------------------------------------------------------
 # closed forms of the chain and the load, routing from design files, friction
 # ---------------------------------------------------------------------------------------------
-from tension_zones.model import _equilibrium as E  # noqa: E402
-from tension_zones.model import _kinematics as K  # noqa: E402
-from tension_zones.model._robot import chain_poses, chain_tip  # noqa: E402
+from tension_zones.model import _equilibrium as E
+from tension_zones.model import _kinematics as K
+from tension_zones.model._robot import chain_poses, chain_tip
 
 
 @pytest.mark.parametrize("b", [np.array([0.0, 0.0]), np.array([0.7, -0.4]), np.array([1e-7, 0.0])])
@@ -337,8 +337,8 @@ def test_load_jacobians_and_chain_tip_derivative_are_exact(x):
     np.testing.assert_allclose(E.load_gradient(L, x, f, g), jax.grad(E.load_potential, argnums=1)(L, x, f, g),
                                atol=1e-10)
     # the custom derivative of the tip against forward mode through the plain chain, in B and L
-    plain = lambda LL, xx: chain_poses(LL, xx.reshape(3, 2))[0][-1]  # noqa: E731
-    fast = lambda LL, xx: chain_tip(LL, xx.reshape(3, 2))[0]  # noqa: E731
+    plain = lambda LL, xx: chain_poses(LL, xx.reshape(3, 2))[0][-1]
+    fast = lambda LL, xx: chain_tip(LL, xx.reshape(3, 2))[0]
     for arg in (0, 1):
         np.testing.assert_allclose(jax.jacfwd(fast, argnums=arg)(L, x), jax.jacfwd(plain, argnums=arg)(L, x),
                                    atol=1e-10)
@@ -370,7 +370,7 @@ def test_long_chains_as_a_scan_equal_the_unrolled_chain(monkeypatch):
 
 
 def test_declared_routing_is_read_and_written(tmp_path):
-    seg = dict(length_mm=40.0, n_wires=3, pitch_radius_mm=3.0)
+    seg = {"length_mm": 40.0, "n_wires": 3, "pitch_radius_mm": 3.0}
     d = {"segments": [seg, dict(seg, wire_angles_deg=[30.0, 150.0, 270.0],
                                 route_angles_deg=[[35.0], [155.0], [275.0]], route_radii_mm=[[4.0], [4.0], [4.0]])]}
     rob = ms.Robot.from_dict(d)

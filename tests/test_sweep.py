@@ -9,13 +9,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from test_metrics import ref_measures
 
 import tension_zones as tz
-from tension_zones.cli import main
 from tension_zones.analysis._metrics import MEASURES
 from tension_zones.analysis._sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses
-
-from test_metrics import ref_measures  # noqa: E402  (tests/ is on sys.path)
+from tension_zones.cli import main
 
 rad = np.radians
 
@@ -149,7 +148,7 @@ def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
                               PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
                                                          + sys.path))
     r = subprocess.run([sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env,
-                       timeout=600)
+                       timeout=600, check=False)
     assert r.returncode == 0, r.stderr[-2000:]
     assert "identical 17" in r.stdout
 

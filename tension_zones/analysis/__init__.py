@@ -2,8 +2,14 @@
 
 from .. import _config  # noqa: F401  (float64 before any array is made)
 from ._metrics import DEFAULT_DQ, MEASURES, pose_measures, pose_metrics, zonogon_vertices
-from ._sweep import compiled_chunk_count, grid_deg, sweep_grid, sweep_poses
-from ._sweep import REDUCTIONS, sweep_designs
+from ._sweep import (
+    REDUCTIONS,
+    compiled_chunk_count,
+    grid_deg,
+    sweep_designs,
+    sweep_grid,
+    sweep_poses,
+)
 
 __all__ = [
     "DEFAULT_DQ",

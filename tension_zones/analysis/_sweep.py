@@ -179,8 +179,8 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
                     groups[(v.dtype, v.shape[1:])].append(k)
             for (dtype, shape), keys in groups.items():
                 results.update(zip(keys, np.empty((len(keys), n_poses) + shape, dtype)))
-        for k in results:
-            results[k][start:stop] = np.asarray(res[k])[: stop - start]  # slice on the host: no dispatch
+        for k, out in results.items():
+            out[start:stop] = np.asarray(res[k])[: stop - start]  # slice on the host: no dispatch
 
     starts = range(0, n_poses, chunk)
     with _progress(n_poses, desc, disable=quiet or len(starts) < 2) as bar:

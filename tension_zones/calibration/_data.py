@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import itertools
 import math
 import re
 from pathlib import Path
@@ -207,7 +208,7 @@ class Dataset:
         if other.n_wires != self.n_wires or other.frame != self.frame:
             raise DataError(f"{Path(other.source).name} does not match {Path(self.source).name} "
                             f"({other.n_wires} vs {self.n_wires} wires, frame {other.frame} vs {self.frame})")
-        cat = lambda a, b: None if a is None or b is None else np.concatenate([a, b])  # noqa: E731
+        cat = lambda a, b: None if a is None or b is None else np.concatenate([a, b])
         groups = None if self.groups is None or other.groups is None else tuple(self.groups) + tuple(other.groups)
         return dataclasses.replace(
             self, sample=np.concatenate([self.sample, other.sample]), q=np.concatenate([self.q, other.q]),
@@ -217,7 +218,7 @@ class Dataset:
 
     def subset(self, mask) -> Dataset:
         idx = np.flatnonzero(np.asarray(mask))
-        take = lambda a: None if a is None else np.asarray(a)[idx]  # noqa: E731
+        take = lambda a: None if a is None else np.asarray(a)[idx]
         return dataclasses.replace(
             self, sample=self.sample[idx], q=self.q[idx], f=self.f[idx], p=self.p[idx], rot=take(self.rot),
             groups=None if self.groups is None else tuple(np.asarray(self.groups, dtype=object)[idx]),
@@ -306,7 +307,7 @@ def _resolve_bad(name: str, bad: dict, n: int, drop_bad: bool, sample_of) -> tup
                         f"{bad[rows[0]][0]!r}: {bad[rows[0]][1]}); more than {MAX_BAD_FRACTION:.0%} is not "
                         "isolated, fix the file")
     run = 1
-    for a, b in zip(rows, rows[1:]):
+    for a, b in itertools.pairwise(rows):
         run = run + 1 if b == a + 1 else 1
         if run > MAX_BAD_RUN:
             raise DataError(f"{name}: rows {b - run + 2}..{b + 1} are all bad; a run of more than "
@@ -409,8 +410,8 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
     for c in qcols:
         if length is not None:
             for i in np.flatnonzero(np.abs(v[c]) >= length):
-                bad.setdefault(int(i), (c, f"wire displacement {v[c][i]:g} mm is not smaller than the robot's "
-                                           f"length {length:g} mm (non-physical)"))
+                bad.setdefault(int(i), (c, (f"wire displacement {v[c][i]:g} mm is not smaller than the robot's "
+                                           f"length {length:g} mm (non-physical)")))
     for c in FORCE_COLS:
         for i in np.flatnonzero(np.abs(v[c]) > MAX_FORCE_N):
             bad.setdefault(int(i), (c, f"force {v[c][i]:g} N exceeds {MAX_FORCE_N:g} N (non-physical)"))
@@ -442,7 +443,7 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
                                 np.stack([cols[c][good] for c in qcols], axis=1), POS_COLS,
                                 lambda i: {"row": int(i) + 1, "sample": _fmt(sample[i])})
     dropped = tuple(dropped) + more
-    stack = lambda cs: np.stack([cols[c][good] for c in cs], axis=1)  # noqa: E731
+    stack = lambda cs: np.stack([cols[c][good] for c in cs], axis=1)
     return Dataset(sample=sample[good].astype(np.int64), q=stack(qcols), f=stack(FORCE_COLS), p=stack(POS_COLS),
                    rot=stack(ROT_COLS), frame="base", dropped=dropped, source=str(path))
 
@@ -515,8 +516,8 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
         if i in bad:
             continue
         if t[i] <= last:
-            bad[i] = ("timestamp", f"{_fmt(t[i])} is not after the previous row's {_fmt(last)} "
-                                   "(samples must be in acquisition order)")
+            bad[i] = ("timestamp", (f"{_fmt(t[i])} is not after the previous row's {_fmt(last)} "
+                                   "(samples must be in acquisition order)"))
         else:
             last = t[i]
     dropped = _resolve_bad(name, bad, len(body), drop_bad, lambda i: "")

@@ -198,8 +198,8 @@ def markdown(report: dict) -> str:
         lines += [f"| {part} | {f} | {_f(v)} |" for part, rows in fam.items() for f, v in rows.items()]
         lines.append("")
     if val and report.get("baselines"):
-        lines += ["Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the "
-                  "training data):", "", "| baseline | choice | held out | validation | validation aligned |",
+        lines += [("Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the "
+                  "training data):"), "", "| baseline | choice | held out | validation | validation aligned |",
                   "| --- | --- | ---: | ---: | ---: |"]
         for k, b in report["baselines"].items():
             lines.append(f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
@@ -211,19 +211,19 @@ def markdown(report: dict) -> str:
             lines.append(f"- **{e['name']}**: {_fmt_params(e['params'], e.get('params_std'))}")
     else:
         lines.append("- No effect of the library improved the held-out error significantly: none added.")
-    lines += [f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}** "
-              f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor).", ""]
+    lines += [(f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}** "
+              f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor)."), ""]
     if report["parameters"].get("at_bound"):
-        lines += [f"Parameters at a bound (their deviations are not meaningful): "
-                  f"{', '.join(report['parameters']['at_bound'])}.", ""]
+        lines += [(f"Parameters at a bound (their deviations are not meaningful): "
+                  f"{', '.join(report['parameters']['at_bound'])}."), ""]
     c = report["correlations"]
     if c["pairs"]:
         lines += ["Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
                   + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + ".", ""]
     lines += ["## Evidence", "",
-              "Score test on the held-out residual (z-value of the chi-square statistic of the residual "
+              ("Score test on the held-out residual (z-value of the chi-square statistic of the residual "
               "projected on the effect's parameter sensitivities; higher = explains more), then the "
-              "refit on the training part and the held-out check:", ""]
+              "refit on the training part and the held-out check:"), ""]
     for rd in report["rounds"]:
         sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
         lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
@@ -289,8 +289,8 @@ def markdown(report: dict) -> str:
             lines.append("- no short refit lowered the held-out error: the loop stops." if screened
                          else "- no candidate significant: the loop stops.")
         lines.append("")
-    lines += ["Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
-              f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):", "",
+    lines += [("Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
+              f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):"), "",
               "| input | variance explained | z |", "| --- | ---: | ---: |"]
     for k, v in report["structure"].items():
         if "explained" in v:
@@ -300,9 +300,9 @@ def markdown(report: dict) -> str:
     lines += [f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
               f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
     lines += ["## Final parameters", "",
-              "`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
+              ("`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
               "in report units (the refit on every sample); `std`: linearised standard deviations from that fit (optimistic: "
-              "consecutive samples are correlated).", "", "```", json.dumps(report["parameters"], indent=1), "```",
+              "consecutive samples are correlated)."), "", "```", json.dumps(report["parameters"], indent=1), "```",
               "", "## Plots", ""]
     for f in report["plots"]:
         lines.append(f"![{f}]({f})")

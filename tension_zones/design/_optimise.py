@@ -46,8 +46,8 @@ import optax
 from .._numerics import compact_programs
 from .._xla import fast_compile_options
 from ..model._design import Design
-from ._scenario import Scenario
 from ..model._zones import tension_mask
+from ._scenario import Scenario
 
 #: Penalty weight on the mean squared controllability violation (objective units per unit^2).
 SPREAD_PENALTY = 1e3
@@ -266,8 +266,8 @@ def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool =
               + task.w_deflection * _smooth_max(defl, sharpness) + wire_cost + penalty)
     worst_dp, worst_defl = jnp.max(dp), jnp.max(defl)
     exact = task.w_position * worst_dp + task.w_deflection * worst_defl + wire_cost
-    pieces = dict(worst_dp=worst_dp, worst_defl=worst_defl, min_spread=min_spread,
-                  violations=violations, statics_infeasible=jnp.sum(~ok))
+    pieces = {"worst_dp": worst_dp, "worst_defl": worst_defl, "min_spread": min_spread,
+                  "violations": violations, "statics_infeasible": jnp.sum(~ok)}
     return smooth, exact, pieces
 
 
@@ -276,7 +276,7 @@ _objective_jit = jax.jit(_objective, static_argnums=(2, 4), compiler_options=fas
 
 
 def _task(sc: Scenario) -> _Task:
-    f = lambda x: jnp.asarray(x, float)  # noqa: E731
+    f = lambda x: jnp.asarray(x, float)
     return _Task(f(sc.theta_L), f(sc.delta), f(sc.dq), f(sc.load), f(sc.w_position),
                  f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]),
                  f(_span(sc)), jnp.asarray(sc.strict_controllability))
@@ -341,7 +341,7 @@ def _bounds(sc: Scenario, n: int) -> _Bounds:
     if sc.forbidden_arc is not None:
         arc0 = sc.forbidden_arc[1]
         arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
-    f = lambda x: jnp.asarray(x, float)  # noqa: E731
+    f = lambda x: jnp.asarray(x, float)
     return _Bounds(f(r_lo), f(r_hi), f(sc.wire_stiffness[0]), f(sc.wire_stiffness[1]),
                    f(sc.wire_diameter + sc.min_wire_gap), f(0.5 * sc.wire_diameter + sc.min_wire_gap),
                    f(arc0), f(arc_len))
@@ -469,7 +469,7 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
                                    with_defl=sc.w_deflection > 0)
         evaluations += sc.starts * (sc.steps + 1)
         i = int(np.argmin(np.asarray(best)))
-        (r, k, angles), exact, pieces = jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out)
+        (r, k, angles), exact, pieces = jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out)  # noqa: B023  (called at once)
         d = base.replace(pitch_radius=float(r), wire_stiffness=float(k), wire_angles=angles)
         rows.append(_result_row(sc, n, d, exact, pieces))
         hist[str(n)] = np.asarray(h[i]).tolist()

@@ -241,7 +241,7 @@ def parse_space(d: dict) -> Space:
     """Validate a space dictionary and fill in the defaults."""
     if not isinstance(d, dict):
         # a ValueError, like every bad space: the command line reports those as one line
-        raise ValueError(f"a design space must be a JSON object, got {type(d).__name__}")  # noqa: TRY004
+        raise ValueError(f"a design space must be a JSON object, got {type(d).__name__}")
     unknown = sorted(set(d) - set(DEFAULTS))
     if unknown:
         raise ValueError(f"unknown space key(s) {unknown}; known: {sorted(DEFAULTS)}")

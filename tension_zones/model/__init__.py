@@ -14,6 +14,15 @@ from ._design import (
     missing_physical_keys,
     read_json,
 )
+from ._equilibrium import (
+    Load,
+    energy,
+    equilibrium,
+    equilibrium_J_pq,
+    forward,
+    wire_stretch,
+    wire_tensions,
+)
 from ._kinematics import (
     THETA_0,
     J_qb,
@@ -30,6 +39,7 @@ from ._kinematics import (
     wire_lengths,
     wire_lengths_b,
 )
+from ._robot import Robot, Structure
 from ._statics import (
     PAPER_DELTA_DEG,
     PAPER_THETA_L_DEG,
@@ -58,28 +68,9 @@ from ._zones import (
     tension_mask,
     tension_score,
 )
-from ._equilibrium import (
-    Load,
-    energy,
-    equilibrium,
-    equilibrium_J_pq,
-    forward,
-    wire_stretch,
-    wire_tensions,
-)
-from ._robot import Robot, Structure
 
 __all__ = [
     "BOUNDARY_TOL",
-    "Load",
-    "Robot",
-    "Structure",
-    "energy",
-    "equilibrium",
-    "equilibrium_J_pq",
-    "forward",
-    "wire_stretch",
-    "wire_tensions",
     "DEFAULT_BACKBONE_EI",
     "DEFAULT_WIRE_STIFFNESS",
     "PAPER_DELTA_DEG",
@@ -94,8 +85,11 @@ __all__ = [
     "J_xb",
     "J_xpsi",
     "J_xq",
+    "Load",
     "MissingDesignKeyWarning",
+    "Robot",
     "Sector",
+    "Structure",
     "TensionMap",
     "TensionSolution",
     "as_wrench",
@@ -104,6 +98,10 @@ __all__ = [
     "compliance_grid",
     "compliance_pose",
     "compliance_pose_jit",
+    "energy",
+    "equilibrium",
+    "equilibrium_J_pq",
+    "forward",
     "jacobians",
     "mask_from_score",
     "min_norm_tensions",
@@ -124,4 +122,6 @@ __all__ = [
     "tip_pose_b",
     "wire_lengths",
     "wire_lengths_b",
+    "wire_stretch",
+    "wire_tensions",
 ]

@@ -92,13 +92,13 @@ class Design:
                 f"direction with fewer), got {n_wires}"
             )
         dtype = jnp.dtype(dtype) if dtype is not None else jnp.result_type(float)
-        values = dict(
-            length=length,
-            pitch_radius=pitch_radius,
-            wire_stiffness=wire_stiffness,
-            backbone_EI=backbone_EI,
-            preload=preload,
-        )
+        values = {
+            "length": length,
+            "pitch_radius": pitch_radius,
+            "wire_stiffness": wire_stiffness,
+            "backbone_EI": backbone_EI,
+            "preload": preload,
+        }
         if wire_angles is None:
             wire_angles = np.arange(n_wires) * (2.0 * np.pi / n_wires)
         values["wire_angles"] = wire_angles
@@ -352,18 +352,18 @@ def _check_count(value) -> None:
     """``n_wires`` from a file: an integer (not a bool, string or fractional number)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         msg = f"n_wires must be an integer of at least 3, got {_what(value)}"
-        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+        raise ValueError(msg)
 
 
 def _check_number_list(key: str, value) -> None:
     """A list of numbers from a file (no strings, booleans, nulls or nested lists)."""
     if not isinstance(value, (list, tuple)):
         msg = f"{key} must be a list of numbers, got {_what(value)}"
-        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+        raise ValueError(msg)
     for i, v in enumerate(value):
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             msg = f"{key}[{i}] must be a number, got {_what(v)}"
-            raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+            raise ValueError(msg)
 
 
 def _check_scalar(name: str, value, field: str | None = None) -> None:
@@ -373,7 +373,7 @@ def _check_scalar(name: str, value, field: str | None = None) -> None:
     field = field or name
     if isinstance(value, (bool, np.bool_, str, type(None), list, tuple, dict)):
         msg = f"{name} must be a number, got {_what(value)}"
-        raise ValueError(msg)  # noqa: TRY004  (every input error is a ValueError)
+        raise ValueError(msg)
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

@@ -19,9 +19,9 @@ from .._numerics import (
     float_dtype,
     pinv_tall2,
     rotvec_to_matrix,
-    sinc_versinc_cubic,
     sinc_comp_sq,
     sinc_sq,
+    sinc_versinc_cubic,
     versinc_sq,
     with_derivatives,
 )

@@ -204,9 +204,9 @@ class Robot:
                 used = np.asarray(arr)[self.crosses]
                 if not np.all(np.isfinite(used)):
                     raise ValueError(f"{name} must be finite where a wire crosses a segment")
-        if route_radii is not None and not isinstance(rr, jax.core.Tracer):
-            if np.any(np.asarray(rr)[self.crosses] <= 0):
-                raise ValueError("route_radii must be positive where a wire crosses a segment")
+        if (route_radii is not None and not isinstance(rr, jax.core.Tracer)
+                and np.any(np.asarray(rr)[self.crosses] <= 0)):
+            raise ValueError("route_radii must be positive where a wire crosses a segment")
         object.__setattr__(self, "route_angles", ra.astype(own_a.dtype))
         object.__setattr__(self, "route_radii", rr.astype(own_a.dtype))
 

@@ -134,7 +134,7 @@ class TensionMap:
         """A plain-text sector table."""
         rows = [f"{'delta (deg)':<22} {'taut':>4}  wires"]
         for s in self.sectors:
-            rows.append(f"{str(s):<22} {s.n_taut:>4}  {', '.join(map(str, s.wires)) or '-'}")
+            rows.append(f"{s!s:<22} {s.n_taut:>4}  {', '.join(map(str, s.wires)) or '-'}")
         return "\n".join(rows)
 
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ._identify import FIT_KEYS, PAPER_REDUCED_OVER_TRADITIONAL_3, PAPER_TABLE, identify
 from ..model._design import Design
 from ..model._statics import PAPER_WRENCH, compliance_grid
+from ._identify import FIT_KEYS, PAPER_REDUCED_OVER_TRADITIONAL_3, PAPER_TABLE, identify
 
 K_VALUES = (55.0, 65.0, 75.0, 85.0, 95.0, 105.0)
 COLORS = {3: "tab:red", 4: "tab:blue"}
@@ -87,9 +87,9 @@ def fig14(grids, path: Path):
 
 def _table_text(table, fit, ratios):
     rows = ["Identified (Levenberg-Marquardt on the twelve means of Tables 1-2):",
-            f"  L = {fit['length_mm']:.3f} mm, r = {fit['pitch_radius_mm']:.3f} mm, "
+            (f"  L = {fit['length_mm']:.3f} mm, r = {fit['pitch_radius_mm']:.3f} mm, "
             f"EI = {fit['backbone_EI_Nmm2']:.2f} N mm^2; mean |relative error| = "
-            f"{100 * fit['mean_relative_error']:.2f} %", "",
+            f"{100 * fit['mean_relative_error']:.2f} %"), "",
             "Tables 1-2 (reduced, no preload): ours vs paper, mean (SD); error of the mean",
             f"{'wires':>5} {'k_w':>5} {'position (mm)':>34} {'angle (deg)':>34}"]
     err = dict(zip(FIT_KEYS, fit["relative_errors"]))
@@ -99,9 +99,9 @@ def _table_text(table, fit, ratios):
             rows.append(
                 f"{n:>5} {k:>5} {o[0]:7.3f} ({o[1]:.3f}) vs {p[0]:6.3f} ({p[1]:.3f}) {100 * err[(n, k, 'mm')]:+5.1f}%"
                 f" {o[2]:7.2f} ({o[3]:.2f}) vs {p[2]:6.2f} ({p[3]:.2f}) {100 * err[(n, k, 'deg')]:+5.1f}%")
-    rows += ["", "Reduced / traditional mean position deflection (k_w = 75, no preload): "
+    rows += ["", ("Reduced / traditional mean position deflection (k_w = 75, no preload): "
              f"3 wires {ratios['3']:.3f} (paper: +206 % = {PAPER_REDUCED_OVER_TRADITIONAL_3}), "
-             f"4 wires {ratios['4']:.3f}"]
+             f"4 wires {ratios['4']:.3f}")]
     return "\n".join(rows)
 
 

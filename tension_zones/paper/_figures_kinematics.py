@@ -38,9 +38,9 @@ def paper_sweeps(dq_values=DQ_SWEEP, length=LENGTH, pitch_radius=PITCH_RADIUS, q
     Returns ``(theta_deg, delta_deg, results)`` with ``results[(n, dq)]`` the dict of
     :func:`tension_zones.analysis.pose_metrics` arrays, shape (18, 145).
     """
-    from ..model._design import Design
     from ..analysis._metrics import pose_metrics
     from ..analysis._sweep import grid_deg, sweep_grid
+    from ..model._design import Design
 
     theta_deg, delta_deg = grid_deg(85.0, 5.0), grid_deg(360.0, 2.5)
     results = {}

@@ -80,7 +80,7 @@ def model_means(log_params):
     L, r, EI = jnp.exp(log_params)
     ks = jnp.asarray([55.0, 75.0, 105.0])
     out = [
-        jax.vmap(lambda k: workspace_stats(Design(n, L, r, wire_stiffness=k, backbone_EI=EI)))(ks)
+        jax.vmap(lambda k: workspace_stats(Design(n, L, r, wire_stiffness=k, backbone_EI=EI)))(ks)  # noqa: B023
         for n in (3, 4)  # n fixes array shapes: one trace per wire count
     ]
     return jnp.stack(out)[:, :, (0, 2)].reshape(-1)  # (n, k, [mm, deg]) = FIT_KEYS order

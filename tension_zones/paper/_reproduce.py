@@ -17,8 +17,8 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
     import matplotlib.pyplot as plt
 
     from ..model._design import Design
-    from ..plots import plot_tension_map
     from ..model._zones import tension_map
+    from ..plots import plot_tension_map
 
     written = []
     tables = {}
