@@ -20,6 +20,7 @@ cache. Deleting the folder is safe: it only costs the next run its compile.
 import functools
 import os
 from pathlib import Path
+from typing import Any
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
 _FUSION = "xla_cpu_use_fusion_emitters"
@@ -69,7 +70,8 @@ def apply_settings() -> None:
     import jax
 
     os.environ["XLA_FLAGS"] = with_scheduler_off(os.environ.get("XLA_FLAGS", ""))
-    mine = jax.config.jax_compilation_cache_dir is None and "JAX_COMPILATION_CACHE_DIR" not in os.environ
+    configured = jax.config.jax_compilation_cache_dir  # type: ignore[attr-defined]
+    mine = configured is None and "JAX_COMPILATION_CACHE_DIR" not in os.environ
     if mine and (path := cache_dir(create=False)):
         jax.config.update("jax_compilation_cache_dir", path)
 
@@ -181,16 +183,17 @@ def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = No
     # (an array's own shape and type: a jnp.asarray of a NumPy one would compile a small program)
     arrays = (a if hasattr(a, "dtype") and hasattr(a, "shape") else jax.numpy.asarray(a) for a in leaves)
     avals = ";".join(f"{a.shape}{a.dtype}{getattr(a, 'weak_type', False)}" for a in arrays)
+    x64 = jax.config.jax_enable_x64  # type: ignore[attr-defined]
     ident = "|".join([_sources_digest(), jax.__version__, ".".join(map(str, _jaxlib_version())),
-                      jax.default_backend(), str(jax.config.jax_enable_x64), str(tree), avals, key,
+                      jax.default_backend(), str(x64), str(tree), avals, key,
                       repr(sorted((compiler_options or {}).items()))])
     path = Path(folder) / "programs" / f"{hashlib.sha256(ident.encode()).hexdigest()}.jaxexport"
-    opts = {"compiler_options": compiler_options} if compiler_options else {}
+    opts: dict[str, Any] = {"compiler_options": compiler_options} if compiler_options else {}
     if (exp := _read_program(path)) is not None:
         return jax.jit(exp.call, **opts)
     try:
         exp = export.export(fn)(*args)
-        blob = exp.serialize() if hasattr(exp, "serialize") else export.serialize(exp)  # (JAX < 0.4.31)
+        blob = exp.serialize() if hasattr(exp, "serialize") else export.serialize(exp)  # type: ignore[attr-defined]  # (JAX < 0.4.31)
     except Exception:  # noqa: BLE001  (a program JAX cannot export or serialise: traced as usual)
         return fn
     _write_atomic(path, blob)
@@ -208,16 +211,14 @@ def _read_program(path):
         return None
 
 
-def _write_atomic(path, blob: bytes) -> None:
-    """Write ``blob`` to ``path``, atomically (a concurrent reader sees the old file or the new one);
-    a folder that cannot be written keeps nothing."""
-    import tempfile
-    from pathlib import Path
+def _write_atomic(path: Path, blob: bytes | bytearray) -> None:
+    """Write ``blob`` to ``path``, atomically (a concurrent reader sees the old file or the new one:
+    :func:`tension_zones._io.atomic_path`); a folder that cannot be written keeps nothing."""
+    from ._io import atomic_path
 
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with tempfile.NamedTemporaryFile(dir=path.parent, delete=False, suffix=".tmp") as f:
-            f.write(blob)
-        Path(f.name).replace(path)
+        with atomic_path(path) as tmp:
+            tmp.write_bytes(blob)
     except OSError:
         return

@@ -264,7 +264,7 @@ def cmd_sweep(args) -> None:
     from ._io import atomic_path
 
     with atomic_path(out) as tmp:
-        np.savez(tmp, theta_L_deg=th, delta_deg=de, **res)
+        np.savez(tmp, theta_L_deg=th, delta_deg=de, **res)  # type: ignore[arg-type]
     if not args.quiet:
         print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
         if args.compliance and not np.all(res["feasible"]):

@@ -104,7 +104,7 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
     ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
     # a legend of at most eight entries
     counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]
-    handles = [plt.Rectangle((0, 0), 1, 1, fc=_count_colour(k, present)) for k in counts]
+    handles: list = [plt.Rectangle((0, 0), 1, 1, fc=_count_colour(k, present)) for k in counts]
     labels = [f"{k} taut" for k in counts]
     if any(s.width_deg == 0 for s in sectors):
         handles.append(plt.Line2D([], [], ls="--", color="k"))
@@ -178,7 +178,7 @@ def _label(column: str) -> str:
     from .design._explore import UNITS, objective
 
     name, best = objective(column)
-    unit = next((u for k, u in UNITS.items() if name.startswith(k)), None)
+    unit = next((u for k, u in UNITS.items() if name.startswith(k)), "")
     unit = {"mm": " (mm)", "rad": " (rad)", "deg": " (deg)"}.get(unit, "")
     return f"{name}{unit}, {'higher' if best == 'max' else 'lower'} is better"
 

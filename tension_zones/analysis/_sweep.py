@@ -26,6 +26,7 @@ import collections
 import functools
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -112,8 +113,8 @@ def compiled_chunk_count() -> int:
     """How many chunk programs have been compiled so far (one per function, wire count, chunk size
     and kind: flat poses, a grid whose poses are generated on the device, or per-design statistics
     of :func:`sweep_designs`, also one per set of statistics)."""
-    return (_eval_chunk_jit._cache_size() + _eval_grid_chunk_jit._cache_size()
-            + _designs_chunk_jit._cache_size())
+    jits: list[Any] = [_eval_chunk_jit, _eval_grid_chunk_jit, _designs_chunk_jit]  # (a jit's own count)
+    return sum(f._cache_size() for f in jits)
 
 
 def _mesh(devices):
@@ -480,7 +481,7 @@ def sweep_designs(
     first = jax.process_index() == 0
     nproc = jax.process_count()
 
-    results = np.full((n_designs, S), np.nan) if first else None
+    results: Any = np.full((n_designs, S), np.nan) if first else None
     is_done = np.zeros(n_chunks, bool)
     for c, rows in (done or {}).items() if first else ():
         a, b = c * D, min(c * D + D, n_designs)
@@ -522,7 +523,7 @@ def sweep_designs(
     initial = n_designs - int(np.sum(np.minimum(pending * D + D, n_designs) - pending * D))
     with _progress(n_designs, desc or "designs", quiet or not first or pending.size < 2,
                    unit="design", initial=initial) as bar:
-        queue = collections.deque()
+        queue: collections.deque[tuple[int, Any]] = collections.deque()
         for k in range(n_rounds):
             queue.append(launch(k))
             if len(queue) >= IN_FLIGHT:

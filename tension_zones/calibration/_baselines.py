@@ -27,7 +27,7 @@ def baselines(data, train, held, val) -> dict | None:
         return None
     X = np.c_[data.q, data.f] if np.any(data.f) else np.asarray(data.q)
     y = np.asarray(data.p)
-    grids = {
+    grids: dict[str, list] = {
         "knn": [(f"k={k}", lambda k=k: make_pipeline(StandardScaler(), KNeighborsRegressor(
             min(k, int(train.sum())), weights="distance"))) for k in (1, 3, 5, 10, 20)],
         "poly_ridge": [(f"degree={d}, alpha={a:g}",

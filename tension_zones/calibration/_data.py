@@ -213,7 +213,7 @@ class Dataset:
         return dataclasses.replace(
             self, sample=np.concatenate([self.sample, other.sample]), q=np.concatenate([self.q, other.q]),
             f=np.concatenate([self.f, other.f]), p=np.concatenate([self.p, other.p]), rot=cat(self.rot, other.rot),
-            groups=groups, session=np.concatenate([self.session, other.session + self.session.max() + 1]),
+            groups=groups, session=np.concatenate([np.asarray(self.session), np.asarray(other.session) + np.asarray(self.session).max() + 1]),
             timestamp=cat(self.timestamp, other.timestamp), dropped=self.dropped + other.dropped)
 
     def subset(self, mask) -> Dataset:
@@ -222,7 +222,7 @@ class Dataset:
         return dataclasses.replace(
             self, sample=self.sample[idx], q=self.q[idx], f=self.f[idx], p=self.p[idx], rot=take(self.rot),
             groups=None if self.groups is None else tuple(np.asarray(self.groups, dtype=object)[idx]),
-            session=self.session[idx], timestamp=take(self.timestamp))
+            session=np.asarray(self.session)[idx], timestamp=take(self.timestamp))
 
 
 # --------------------------------------------------------------------------------------------
@@ -422,12 +422,12 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
     for i in np.flatnonzero(np.isfinite(sample) & (sample != np.round(sample))):
         bad.setdefault(int(i), ("sample", f"value {sample[i]} is not an integer"))
     seen: dict[float, int] = {}
-    for i, s in enumerate(sample):
-        if i in bad:
+    for row, s in enumerate(sample):
+        if row in bad:
             continue
         if s in seen:
-            bad[i] = ("sample", f"sample number {s:g} repeats row {seen[s] + 1}")
-        seen.setdefault(s, i)
+            bad[row] = ("sample", f"sample number {s:g} repeats row {seen[s] + 1}")
+        seen.setdefault(s, row)
     dropped = _resolve_bad(name, bad, len(body), drop_bad, lambda i: f" (sample {_fmt(sample[i])})")
     keep = np.ones(len(body), bool)
     keep[list(bad)] = False
@@ -487,13 +487,13 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     li = header.index("pattern_label")
     labels = [r[li].strip() if li < len(r) else "" for r in body]
     if servo_ids is None:
-        m = servo_map_from_labels(name, labels)
-        missing = [t for t in range(len(servo_cols)) if t not in m]
+        servo_of = servo_map_from_labels(name, labels)
+        missing = [t for t in range(len(servo_cols)) if t not in servo_of]
         if missing:
             raise DataError(f"{name}: no pattern label 'tendon{missing[0]}_id<servo>' says which servo drives "
                             f"tendon {missing[0]}: the map comes from the single-tendon pulls' labels (is the file "
                             "truncated?); a validation file takes its training file's map")
-        servo_ids = [m[t] for t in range(len(servo_cols))]
+        servo_ids = [servo_of[t] for t in range(len(servo_cols))]
     servo_ids = tuple(int(s) for s in servo_ids)
     if len(set(servo_ids)) != len(servo_ids):
         raise DataError(f"{name}: the servo map {list(servo_ids)} repeats a servo")

@@ -57,7 +57,7 @@ def _norm_isf(p: float) -> float:
     return 0.5 * (lo + hi)
 
 
-def _trimmed_sigma(d: np.ndarray) -> np.ndarray:
+def _trimmed_sigma(d: np.ndarray) -> tuple[np.ndarray, int]:
     """Per-axis sigma of zero-mean noise samples ``d`` (M, 3), leaving out gross values."""
     mad = 1.4826 * np.median(np.abs(d), axis=0)
     keep = np.all(np.abs(d) <= GLITCH_SIGMAS * np.maximum(mad, 1e-12), axis=1)
@@ -245,7 +245,7 @@ def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
     """
     q, p = np.asarray(data.q, float), np.asarray(data.p, float)
     timed = data.timestamp is not None
-    t = (np.asarray(data.timestamp, float) - float(data.timestamp[0])) / 60.0 if timed else np.arange(len(q), dtype=float)
+    t = (np.asarray(data.timestamp, float) - float(data.timestamp[0])) / 60.0 if data.timestamp is not None else np.arange(len(q), dtype=float)
     session = np.zeros(len(q), int) if data.session is None else np.asarray(data.session)
     start = np.r_[0, np.flatnonzero(np.diff(session)) + 1]  # each session's first sample
     first = start[np.searchsorted(start, np.arange(len(q)), side="right") - 1]

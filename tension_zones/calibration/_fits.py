@@ -236,7 +236,8 @@ class Runner:
     end with it)."""
 
     def __init__(self, fits: Fits, workers: int = 0, problem_args=None, warm=None):
-        self.fits, self.pool, self._warm, self._threads, self._warm_args = fits, None, {}, [], dict(warm or {})
+        self.fits, self.pool, self._warm, self._warm_args = fits, None, {}, dict(warm or {})
+        self._threads: list = []
         if workers > 0:
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor

@@ -16,6 +16,7 @@ import dataclasses
 import threading
 from concurrent.futures import Future
 from functools import partial
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -29,7 +30,7 @@ from .._xla import classes_digest, fast_compile_options, stored_program
 class Spec:
     """The static part: a model and its blocks (nominal first), with their sizes."""
 
-    model: object
+    model: Any  # a model: RobotModel or any object with its interface (``predict``, ...)
     blocks: tuple
     sizes: tuple
 

@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import jax
 import numpy as np
 
+from .._io import atomic_path
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
 from ..model._design import Design, read_json
@@ -124,12 +124,11 @@ def explore_designs(
 # --------------------------------------------------------------------------------------------
 # The output folder: manifest, chunk files, table
 # --------------------------------------------------------------------------------------------
-def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through a temporary file (same suffix: NumPy keeps the name) and rename it: a file is
-    either complete or absent."""
-    tmp = path.with_name(".tmp-" + path.name)
-    write(tmp)
-    os.replace(tmp, path)
+def _write_atomic(path: Path, write: Callable[[Path], object]) -> None:
+    """``write(tmp)`` to a temporary file (same suffix: NumPy keeps the name), renamed to ``path``: a
+    file is either complete or absent (:func:`tension_zones._io.atomic_path`)."""
+    with atomic_path(path) as tmp:
+        write(tmp)
 
 
 def _first_difference(a: dict, b: dict) -> str | None:
@@ -153,7 +152,8 @@ class _Store:
             self.manifest = read_json(self.manifest_path, "exploration manifest")
             old = {k: self.manifest.get(k) for k in ident}
             if old != ident:
-                key = _first_difference(old["space"] or {}, ident["space"]) if old["format"] == FORMAT else None
+                key = (_first_difference(old["space"] or {}, ident["space"])  # type: ignore[arg-type]
+                       if old["format"] == FORMAT else None)
                 what = f"space key {key!r} differs" if key else "another format or statistics"
                 raise ValueError(f"{str(self.out)!r} holds another exploration ({what}); refusing to "
                                  "mix them: choose a new output folder")
@@ -199,7 +199,7 @@ class _Store:
 
     def finish(self, table: dict[str, np.ndarray]) -> list[Path]:
         paths = [self.out / "table.npz", self.out / "table.csv"]
-        _write_atomic(paths[0], lambda p: np.savez(p, **table))
+        _write_atomic(paths[0], lambda p: np.savez(p, **table))  # type: ignore[arg-type]
         _write_atomic(paths[1], lambda p: write_csv(table, p))
         self.manifest["complete"] = True
         self._save_manifest()
@@ -263,7 +263,7 @@ def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[st
                                 poses_per_chunk=space.poses_per_chunk, quiet=quiet,
                                 desc=f"{n} wires", done=done, on_chunk=on_chunk)
         if first:
-            parts.append({**space.columns(n), **stats})
+            parts.append({**space.columns(n), **stats})  # type: ignore[dict-item]  # (the first process has them)
     if not first:
         return None
     table = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}

@@ -183,7 +183,8 @@ def halton(n: int, dims: int, start: int = 1) -> np.ndarray:
 
 
 def _primes(count: int) -> list[int]:
-    primes, c = [], 2
+    primes: list[int] = []
+    c = 2
     while len(primes) < count:
         if all(c % p for p in primes if p * p <= c):
             primes.append(c)

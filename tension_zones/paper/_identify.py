@@ -113,8 +113,8 @@ def identify(initial=None, maxiter: int = 50):
     else:
         starts = [initial]
     best = None
-    for start in starts:
-        start = np.asarray(start, dtype=float)
+    for guess in starts:
+        start = np.asarray(guess, dtype=float)
         if start.shape != (3,) or not np.all(np.isfinite(start)) or np.any(start <= 0):
             raise ValueError(
                 f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}"
