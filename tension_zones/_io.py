@@ -44,6 +44,19 @@ def write_text(path, text: str) -> Path:
     return Path(path)
 
 
+def save_figure(fig, path, **savefig_kw) -> Path:
+    """``fig.savefig(path, **savefig_kw)``, atomically (the temporary file keeps ``path``'s suffix,
+    from which Matplotlib takes the format). A path without a suffix and no ``format`` is saved as
+    Matplotlib saves it (it appends its default format's suffix)."""
+    path = Path(path)
+    if not path.suffix and "format" not in savefig_kw:
+        fig.savefig(path, **savefig_kw)
+        return path
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, **savefig_kw)
+    return path
+
+
 def _null_for_nan(x):
     if isinstance(x, float) and not math.isfinite(x):
         return None

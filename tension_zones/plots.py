@@ -6,8 +6,13 @@ import math
 
 import matplotlib
 
-if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
-    try:  # headless by default; notebooks keep their inline backend
+
+def _choose_backend() -> None:
+    """The package's one choice of Matplotlib backend: headless (Agg) by default; an IPython session
+    (a notebook's inline backend, an interactive one) keeps its own."""
+    if matplotlib.get_backend().lower() in ("agg", "module://matplotlib_inline.backend_inline"):
+        return
+    try:
         import IPython
 
         if IPython.get_ipython() is None:
@@ -15,11 +20,20 @@ if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.b
     except ImportError:
         matplotlib.use("Agg")
 
+
+_choose_backend()
+
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Wedge
 
 from .model._zones import TensionMap
+
+
+def pyplot():
+    """``matplotlib.pyplot``, with the backend chosen as above (for figures made outside this module)."""
+    return plt
+
 
 _COUNT_COLOURS = {0: "#d62728", 1: "#fdd49e", 2: "#9ecae1", 3: "#74c476", 4: "#31a354"}
 #: Above this many wires a map has too many sectors and rings to label each: the sectors are then

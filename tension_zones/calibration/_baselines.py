@@ -10,9 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._fits import rmse
+
 
 def _rmse(a, b) -> float:
-    return float(np.sqrt(np.mean(np.sum((np.asarray(a) - np.asarray(b)) ** 2, axis=1))))
+    return rmse(np.asarray(a) - np.asarray(b))
 
 
 def baselines(data, train, held, val) -> dict | None:

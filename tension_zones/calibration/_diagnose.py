@@ -29,6 +29,7 @@ import math
 import numpy as np
 
 from ._data import Dataset
+from ._fits import rmse
 
 GLITCH_SIGMAS = 5.0
 
@@ -262,7 +263,7 @@ def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
     e = p[home].reshape(-1) - A @ sol
     std = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)) * (e @ e) / max(A.shape[0] - A.shape[1], 1))
     return {"n": K, "index": home, "direction": u,
-            "spread_mm": float(np.sqrt(np.mean(np.sum((p[home] - centre) ** 2, axis=1)))),
+            "spread_mm": rmse(p[home] - centre),
             "along_mm": float(sol[3]), "along_std_mm": float(std[3]),
             "across_mm": float(np.sqrt(np.mean(e**2) * 3)), "drift_mm": sol[4:7], "drift_std_mm": std[4:7],
             "time_unit": "minute" if timed else "sample", "span": float(t[-1] - t[0])}

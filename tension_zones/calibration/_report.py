@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ._fits import SCREEN_ITERATIONS
+from .._io import save_figure, write_text
+from ._fits import SCREEN_ITERATIONS, rmse
 from ._loop import EXCESS_RATIO, SECOND_LOOK_SHARE, STRUCTURE_Z, Result
 
 PLOTS = {
@@ -29,12 +30,9 @@ FILES = ("report.json", "report.md", *PLOTS.values(), PATHS_PLOT)
 
 
 def _pyplot():
-    import matplotlib
+    from ..plots import pyplot  # the package's one choice of backend
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-
-    return plt
+    return pyplot()
 
 
 #: Fixed margins (the figures' sizes and labels are fixed): ``tight_layout`` would draw every figure
@@ -100,7 +98,7 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
     # the validation file by the final model (refitted on every sample), the held-out part by the fit
     # that never saw it
     p = res.predicted(None if on_val else res.theta_selected)[mask]
-    err = float(np.sqrt(np.mean(np.sum((p - m) ** 2, axis=1))))
+    err = rmse(p - m)
     what = "validation file" if on_val else "held-out part"
     best = None
     if on_val and res.baselines:
@@ -136,16 +134,7 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
 
 
 def _save(fig, path: Path) -> None:
-    """Write a figure atomically (a temporary name in the same folder, then a rename)."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=110, format="png")
-    os.replace(tmp, path)
-
-
-def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    save_figure(fig, path, dpi=110, format="png")
 
 
 def _fmt_params(params: dict, std: dict | None = None) -> str:
@@ -336,8 +325,8 @@ def write_report(res: Result, out_dir, **extra) -> dict:
     try:
         report["plots"] = [p.name for p in plot_residuals(res, stage)] + [plot_paths(res, stage).name]
         report = _jsonable(report)
-        _write_text(stage / "report.json", json.dumps(report, indent=1))
-        _write_text(stage / "report.md", markdown(report))
+        write_text(stage / "report.json", json.dumps(report, indent=1))
+        write_text(stage / "report.md", markdown(report))
         for f in [*report["plots"], "report.json", "report.md"]:
             os.replace(stage / f, out / f)
     finally:

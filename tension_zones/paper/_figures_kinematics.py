@@ -178,9 +178,11 @@ def measure_figure(theta_deg, delta_deg, r3, r4, name, label_v, label_w, fig_tit
 def _save(fig, path):
     import matplotlib.pyplot as plt
 
+    from .._io import save_figure
+
     if path is None:
         return fig
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
