@@ -56,7 +56,7 @@ print(os.path.isdir(jax.config.jax_compilation_cache_dir))
     assert (before, after) == ("False", "True")
 
 
-#: What package text (code, comments, docstrings, CLI help) must not say: a measurement of a day
+#: What package text (code, comments, docstrings, CLI help, the READMEs beside the code) must not say: a measurement of a day
 #: (a duration, a date, the machine it ran on) or a before/now comparison. Those live in git history
 #: and in generated benchmark output; the code says what it does and why.
 _NOTEBOOK = {
@@ -69,7 +69,8 @@ _NOTEBOOK = {
 
 
 def _package_lines():
-    for path in sorted((ROOT / "tension_zones").rglob("*.py")):
+    pkg = ROOT / "tension_zones"
+    for path in sorted(pkg.rglob("*.py")) + sorted(pkg.rglob("*.md")):
         for i, line in enumerate(path.read_text().splitlines(), 1):
             yield path.relative_to(ROOT), i, line
 
