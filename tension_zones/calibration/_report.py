@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._io import save_figure, write_text
+from .._io import save_figure
 from ._fits import SCREEN_ITERATIONS, rmse
 from ._loop import EXCESS_RATIO, SECOND_LOOK_SHARE, STRUCTURE_Z, Result
 
@@ -135,6 +135,12 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
 
 def _save(fig, path: Path) -> None:
     save_figure(fig, path, dpi=110, format="png")
+
+
+def _write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
 
 
 def _fmt_params(params: dict, std: dict | None = None) -> str:
@@ -325,8 +331,8 @@ def write_report(res: Result, out_dir, **extra) -> dict:
     try:
         report["plots"] = [p.name for p in plot_residuals(res, stage)] + [plot_paths(res, stage).name]
         report = _jsonable(report)
-        write_text(stage / "report.json", json.dumps(report, indent=1))
-        write_text(stage / "report.md", markdown(report))
+        _write_text(stage / "report.json", json.dumps(report, indent=1))
+        _write_text(stage / "report.md", markdown(report))
         for f in [*report["plots"], "report.json", "report.md"]:
             os.replace(stage / f, out / f)
     finally:

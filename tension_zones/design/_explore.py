@@ -14,13 +14,13 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import jax
 import numpy as np
 
-from .._io import atomic_path
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
 from ..model._design import Design, read_json
@@ -124,11 +124,12 @@ def explore_designs(
 # --------------------------------------------------------------------------------------------
 # The output folder: manifest, chunk files, table
 # --------------------------------------------------------------------------------------------
-def _write_atomic(path: Path, write: Callable[[Path], object]) -> None:
-    """``write(tmp)`` to a temporary file (same suffix: NumPy keeps the name), renamed to ``path``: a
-    file is either complete or absent (:func:`tension_zones._io.atomic_path`)."""
-    with atomic_path(path) as tmp:
-        write(tmp)
+def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
+    """Write through a temporary file (same suffix: NumPy keeps the name) and rename it: a file is
+    either complete or absent."""
+    tmp = path.with_name(".tmp-" + path.name)
+    write(tmp)
+    os.replace(tmp, path)
 
 
 def _first_difference(a: dict, b: dict) -> str | None:
@@ -152,8 +153,7 @@ class _Store:
             self.manifest = read_json(self.manifest_path, "exploration manifest")
             old = {k: self.manifest.get(k) for k in ident}
             if old != ident:
-                key = (_first_difference(old["space"] or {}, ident["space"])  # type: ignore[arg-type]
-                       if old["format"] == FORMAT else None)
+                key = _first_difference(old["space"] or {}, ident["space"]) if old["format"] == FORMAT else None  # type: ignore[arg-type]
                 what = f"space key {key!r} differs" if key else "another format or statistics"
                 raise ValueError(f"{str(self.out)!r} holds another exploration ({what}); refusing to "
                                  "mix them: choose a new output folder")
@@ -180,7 +180,7 @@ class _Store:
         return self.out / "chunks" / f"n{n}_{c:06d}.npy"
 
     def _save_manifest(self) -> None:
-        _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))
+        _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))  # type: ignore[arg-type,return-value]
 
     def done(self, n: int) -> dict[int, np.ndarray]:
         """The chunks of ``n`` wires the manifest lists as done, read back (a listed chunk whose file
