@@ -395,7 +395,9 @@ def _check_stats(fn, design, args, stats):
     return stats
 
 
-def _positive_int(name, v):
+def positive_int(name: str, v) -> int:
+    """``v`` as an ``int`` if it is a positive integer (Python or NumPy; a bool is not), else the
+    one-line ``ValueError`` "``name`` must be a positive integer, got ``v``"."""
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
         raise ValueError(f"{name} must be a positive integer, got {v!r}")
     return int(v)
@@ -469,8 +471,8 @@ def sweep_designs(
     if not isinstance(designs, Design) or np.ndim(designs.length) != 1:
         raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis "
                         "(a batch of designs)")
-    D = _positive_int("designs_per_chunk", designs_per_chunk)
-    P = _positive_int("poses_per_chunk", poses_per_chunk)
+    D = positive_int("designs_per_chunk", designs_per_chunk)
+    P = positive_int("poses_per_chunk", poses_per_chunk)
     th, de = (np.asarray(x, dtype=float) for x in (theta_L, delta))
     if th.ndim != 1 or de.ndim != 1 or th.size == 0 or de.size == 0:
         raise ValueError(f"theta_L and delta must be non-empty 1-D grids, got shapes {th.shape} and {de.shape}")

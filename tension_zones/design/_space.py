@@ -20,7 +20,7 @@ from typing import Any
 import jax
 import numpy as np
 
-from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK
+from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, positive_int
 from ..model._design import (
     _DATA_FIELDS,
     DEFAULT_BACKBONE_EI,
@@ -219,9 +219,7 @@ def _field(key, v, lo=None, lo_open=False):
 
 
 def _positive_int(key, v):
-    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-        raise _err(key, f"must be a positive integer, got {v!r}", KIND)
-    return v
+    return positive_int(f"{KIND} key {key!r}:", v)  # the message of _err(key, ..., KIND)
 
 
 def _sample(given: Any) -> tuple[str, int, int]:
