@@ -153,6 +153,15 @@ def test_effect_outside_library_reports_structure(tmp_path):
     assert rep["structure"]["order"]["z"] > 4
 
 
+def test_a_large_effect_outside_the_library_is_not_named_far_above_the_floor(tmp_path):
+    """Nine noise floors above the floor the share a refit needs has fallen, but not below what a
+    library effect explains of structure the library lacks (``MIN_SHARE``): the pattern's rotation
+    explains 15 % of a 1 mm drift and is not named."""
+    rep = run(tmp_path, "drift", Truth(drift_mm=1.0))
+    assert rep["rmse_after_mm"] > 8 * rep["noise_floor_mm"]
+    assert names(rep) == [] and rep["unexplained_structure"] is True
+
+
 def test_glitches_robust_loss_keeps_the_fit(tmp_path):
     truth = Truth(play=(0.2, 0.3, 0.15), glitches=6)
     rob = run(tmp_path, "glitch", truth, robust=True)

@@ -35,11 +35,10 @@ For any robot (one segment or many) and any reader:
    ``EXCESS_SCALE`` noise floors above the floor with structure left, and its last round kept nothing
    though a refit passed every test but the share, a *joint look*: the loop goes on from that refit
    with refits that need no share of their own (every other test stands), and keeps what that path
-   adds only if together it explains ``min_excess`` of the excess (the share one effect needs near the
-   floor) with a significant drop for all its parameters. Far above the floor the excess is the sum of
-   many missing effects, and several small real ones can each fall short of the share: on FTDCR v4 the
-   wires' drift, the geometry and the routing twist explain 8.2, 9.4 and 14.3 % of it one after the
-   other (the first two short of the 11.3-11.7 % one needs there), 28.7 % together (the validation
+   adds only if together it explains the share one effect would need there (``_share_needed``), with
+   a significant drop for all its parameters. Far above the floor the excess is the sum of many
+   missing effects, and several small real ones can each fall short of the share (on FTDCR v4 the
+   wires' drift, the geometry and the routing twist, one after the other; together they pass, and the
    error falls with them). Report the
    error before and after. A validation file is only predicted, after every decision: its samples
    ride along in the same compiled program (a second recording, weight zero) and are never looked at
@@ -96,10 +95,14 @@ TRIES_PER_ROUND = 4
 SECOND_LOOK_SHARE = 0.5
 #: A candidate must explain ``min_excess`` of the held-out mean square's excess over the noise floor
 #: while the model is within this many noise floors of it, and a share falling as ``1 / ratio``
-#: beyond: far above the noise the excess is the sum of many missing effects, and one real effect
-#: explains only its part (on the FTDCR v4 robot, 8-22 %); near the noise, structure from outside the
-#: library lets flexible effects explain 10-20 % of it by chance.
+#: beyond: far above the noise the excess is the sum of many missing effects, of which one real
+#: effect explains only its part.
 EXCESS_SCALE = 4.0
+#: ... but never less than this. The share guards against structure the library lacks, not against
+#: noise (the chi-square tests do that): on the generator's sets whose structure lies outside the
+#: library (a tracker drift along the acquisition, 1.5 to 11 noise floors; ``benchmarks/thresholds.py``)
+#: a library effect's refit explained up to 15 % of the excess, at any distance from the floor.
+MIN_SHARE = 0.2
 
 
 @dataclasses.dataclass
@@ -470,7 +473,7 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
                 drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
                 share, share_train = _share(err, err_new, noise["floor_mm"]), _share(tr0, tr1, noise["floor_mm"])
-                share_needed = 0.0 if st.relaxed else min_excess * min(1.0, EXCESS_SCALE * noise["floor_mm"] / err)
+                share_needed = 0.0 if st.relaxed else _share_needed(min_excess, err, noise["floor_mm"])
                 tests = (drop > need and err_new < (1.0 - min_gain) * err and drop_train > need
                          and (not s.get("second_look") or share >= SECOND_LOOK_SHARE))
                 extra = {}
@@ -565,14 +568,15 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             share = _share(end[1], end_alt[1], noise["floor_mm"])
             drop = (end[1] ** 2 - end_alt[1] ** 2) * m / unit_of(end[1])
             need = chi2_quantile(alpha, max(dof, 1))
-            ok = bool(added) and share >= min_excess and drop > need
+            share_needed = _share_needed(min_excess, end[1], noise["floor_mm"])  # as for one effect
+            ok = bool(added) and share >= share_needed and drop > need
             jl = {"first": first, "effects": alt.active[len(nominal_names):], "added": added,
                   "removed": [a for a in st.active if a not in alt.active], "rmse_held_out_mm": end_alt[0],
                   "rmse_before_mm": end[0],
-                  "share_held_out": share, "share_needed": min_excess, "sse_drop": drop, "needed": need,
+                  "share_held_out": share, "share_needed": share_needed, "sse_drop": drop, "needed": need,
                   "kept": ok}
             say(f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
-                f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * min_excess:.0f} %)"
+                f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * share_needed:.0f} %)"
                 f"{': kept' if ok else ''}")
             if ok:
                 st, end = alt, end_alt
@@ -668,6 +672,13 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                       rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
                       robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
                       baselines=bl, seconds=time.perf_counter() - t0, registration=reg)
+
+
+def _share_needed(min_excess: float, err: float, floor: float) -> float:
+    """The share of the excess a refit (or the joint look's path) at held-out error ``err`` must
+    explain: ``min_excess`` within ``EXCESS_SCALE`` noise floors, falling as ``1 / ratio`` beyond, never
+    below ``MIN_SHARE`` (nor above ``min_excess``)."""
+    return min(min_excess, max(MIN_SHARE, min_excess * EXCESS_SCALE * floor / err))
 
 
 def _share(before: float, after: float, floor: float) -> float:
