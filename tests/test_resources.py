@@ -83,6 +83,7 @@ def test_a_coordinator_that_does_not_answer_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_ctrl_c_stops_a_long_optimize_within_seconds(tmp_path):
     """A compiled loop of 10^8 steps does not return to Python: the watchdog ends it, status 130, one
     line, no result folder."""
