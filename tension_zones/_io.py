@@ -3,7 +3,9 @@
 :func:`atomic_path` hands out a temporary name in the target's own folder (same file system, same
 suffix, so writers that infer the format from the name still do); the finished file replaces the
 target in one ``os.replace``. Until then the old file, if any, is untouched, and on any error or
-interrupt the temporary file is removed.
+interrupt the temporary file is removed. :func:`staged_folder` does the same for a folder's files:
+they are made in a hidden staging folder and moved in together at the end. :func:`folder_lock` keeps
+two processes from writing one folder at once.
 """
 
 from __future__ import annotations
@@ -12,6 +14,8 @@ import contextlib
 import json
 import math
 import os
+import shutil
+import socket
 import tempfile
 from pathlib import Path
 
@@ -35,6 +39,73 @@ def atomic_path(path):
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
+
+
+@contextlib.contextmanager
+def staged_folder(out, last=()):
+    """``with staged_folder(folder) as stage: write files into stage``: the files appear in ``folder``
+    (created if need be) when the block ends, ``last`` (the names that say the output is finished)
+    after the others; on an error or interrupt none do, and the hidden ``.partial-*`` stage is removed
+    (one left by a killed process is hidden: nothing that looks finished, nothing a rerun refuses)."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    stage = Path(tempfile.mkdtemp(dir=out, prefix=".partial-"))
+    try:
+        yield stage
+        names = sorted(p.name for p in stage.iterdir())
+        for name in [n for n in names if n not in last] + [n for n in last if n in names]:
+            os.replace(stage / name, out / name)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+
+
+#: The lock file :func:`folder_lock` makes in a folder.
+LOCK_NAME = ".lock"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process
+        return True
+    return True
+
+
+@contextlib.contextmanager
+def folder_lock(folder, command: str):
+    """Hold ``folder``'s lock (``.lock``: this process's id and host) while the block runs; raise a
+    one-line ``ValueError`` where another live process holds it. A lock whose process has gone (killed)
+    is taken over; one held on another host is not (its process cannot be checked from here)."""
+    path = Path(folder) / LOCK_NAME
+    me = f"{os.getpid()} {socket.gethostname()}"
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+        except FileExistsError:
+            try:
+                pid, host = (path.read_text().split() + ["", ""])[:2]
+            except FileNotFoundError:  # released meanwhile
+                continue
+            if host == socket.gethostname() and pid.isdigit() and not _alive(int(pid)):
+                with contextlib.suppress(FileNotFoundError):
+                    path.unlink()  # stale: its process was killed
+                continue
+            raise ValueError(f"{str(Path(folder))!r} is in use by another {command} (process {pid or '?'} on "
+                             f"{host or '?'}); wait for it to end or choose another folder (if no such process "
+                             f"runs, remove {str(path)!r})") from None
+        with os.fdopen(fd, "w") as f:
+            f.write(me + "\n")
+        break
+    else:
+        raise ValueError(f"{str(Path(folder))!r}: could not take its lock {str(path)!r}")
+    try:
+        yield path
+    finally:
+        with contextlib.suppress(OSError):
+            if path.read_text().strip() == me:
+                path.unlink()
 
 
 def write_text(path, text: str) -> Path:

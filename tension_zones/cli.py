@@ -6,6 +6,8 @@ Errors are one line on stderr (``tension-zones: error: ...``) and exit status 2,
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
 import os
 import sys
 import tempfile
@@ -345,9 +347,16 @@ def cmd_calibrate(args) -> None:
                                "not both")
             library = (default_library(data.frame, [n for n in extra if n in OPT_IN]) if extra
                        else tuple(BY_NAME[n] for n in names))
-        log = None if args.quiet else (lambda s: print(s, file=sys.stderr))
+        data, val, first = _calibration_size(args, data, val, robot.n_segments)
+
+        def say(line):  # the estimate first, once the calibration has checked its inputs
+            while first:
+                print(first.pop(), file=sys.stderr)
+            print(line, file=sys.stderr)
+
         res = calibrate(data, robot, validate=val, library=library,
-                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust, log=log,
+                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust,
+                        log=None if args.quiet else say,
                         workers=args.workers)
     except DataError as e:
         raise CLIError(str(e)) from None
@@ -368,6 +377,31 @@ def cmd_calibrate(args) -> None:
     print(line)
     if not args.quiet:
         print(f"wrote {out / 'report.json'}, {out / 'report.md'} and {len(report['plots'])} plots")
+
+
+def _calibration_size(args, data, val, n_segments: int):
+    """``--subsample``, then the memory estimate: refused beyond what the machine has unless ``--force``
+    (one line saying what to do). Returns the recordings calibrated and the estimate's line in a list."""
+    from ._resources import MEMORY_SHARE, check_memory, gb, machine_memory
+    from .calibration._fits import MEMORY_BASE, MEMORY_PER_SAMPLE, peak_memory, worker_count
+
+    if args.subsample is not None:
+        if args.subsample < 1:
+            raise CLIError(f"--subsample must be 1 or more, got {args.subsample}")
+        keep = lambda d: d.subset(np.arange(d.n_samples) % args.subsample == 0)
+        data, val = keep(data), None if val is None else keep(val)
+    n = data.n_samples + (0 if val is None else val.n_samples)
+    workers = worker_count(args.workers, n * n_segments)
+    need = peak_memory(n * n_segments, workers)
+    what = (f"calibrating {n:,} samples x {n_segments} segment(s)"
+            + (f" with {workers} worker process(es)" if workers else ""))
+    if not args.force:
+        have = machine_memory() or 0
+        fits = (MEMORY_SHARE * have / (1 + workers) - MEMORY_BASE) / (MEMORY_PER_SAMPLE * n_segments)
+        k = math.ceil(n * (args.subsample or 1) / fits) if fits > 0 else 0
+        check_memory(need, what, (f"pass --subsample {k} (one sample in {k}, in acquisition order)" if k
+                                  else "pass fewer --workers") + " or --force to run it anyway")
+    return data, val, [f"{what}: about {gb(need)} of memory (estimated)"]
 
 
 def _out_dir(path: str, names=(), force: bool = False) -> Path:
@@ -433,7 +467,12 @@ def _add_calibrate_parser(sub) -> None:
     c.add_argument("--robust", action="store_true", help="Huber loss (tracker glitches)")
     c.add_argument("--drop-bad", action="store_true",
                    help="drop isolated bad rows (listed in the report) instead of failing")
-    c.add_argument("--force", action="store_true", help="replace an existing report in --out")
+    c.add_argument("--force", action="store_true",
+                   help="replace an existing report in --out; run a recording whose memory estimate is beyond "
+                        "what the computer has")
+    c.add_argument("--subsample", type=int, metavar="K",
+                   help="keep every Kth sample of the recordings (in acquisition order), e.g. for one too large "
+                        "for the computer's memory")
     c.add_argument("--workers", type=int, default=None,
                    help="processes running the loop's independent fits alongside this one (default: one per "
                         "spare core, at most 4, for 1024 samples x segments or more; 0: none; a count asked for "
@@ -451,32 +490,63 @@ def _init_distributed(args) -> None:
              "--process-id": args.process_id}
     if not args.distributed and all(v is None for v in given.values()):
         return
-    import jax
-
+    _positive("--coordinator-timeout", args.coordinator_timeout)
     missing = [k for k, v in given.items() if v is None]
     if len(missing) < 3:  # explicit coordinates: all three
         if missing:
             raise CLIError(f"{', '.join(given)} go together: {missing[0]} is missing")
         kw = {"coordinator_address": args.coordinator, "num_processes": args.num_processes,
               "process_id": args.process_id}
+        if args.process_id != 0:
+            _wait_for_coordinator(args.coordinator, args.coordinator_timeout)
     else:  # --distributed: the cluster's environment says (SLURM, Open MPI, ...)
         kw = {}
+    import jax
+
     try:
-        jax.distributed.initialize(**kw)
+        jax.distributed.initialize(**kw, initialization_timeout=max(1, math.ceil(args.coordinator_timeout)))
     except (RuntimeError, ValueError) as e:
         raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+
+
+def _wait_for_coordinator(address: str, timeout: float) -> None:
+    """Connect to ``HOST:PORT`` until it answers or ``timeout`` seconds have passed, then raise a
+    one-line CLIError: past its ``initialization_timeout``, ``jax.distributed.initialize`` aborts the
+    process from C++ (a stack trace, status 134) instead of raising."""
+    import socket
+    import time
+
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise CLIError(f"--coordinator must be HOST:PORT, got {address!r}")
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=max(0.1, min(5.0, timeout))):
+                return
+        except OSError as e:
+            reason = e.strerror or type(e).__name__
+        if time.monotonic() >= deadline:
+            raise CLIError(f"--coordinator {address} did not answer within {timeout:g} s ({reason}); start "
+                           "process 0 first, check the address, or raise --coordinator-timeout")
+        time.sleep(0.25)
 
 
 def cmd_explore(args) -> None:
     import time
 
-    from .design._explore import check_front, default_front, explore, summary, write_front
+    import jax
+
+    from .design._explore import check_front, default_front, explore, plan, summary, write_front
     from .design._space import load_space
 
     _init_distributed(args)
     space = load_space(args.space)
     front = default_front(space) if args.front is None else [c.strip() for c in args.front.split(",")]
     check_front(space, front)
+    line = plan(space)  # the work, said up front (a chunk beyond the machine's memory: refused)
+    if not args.quiet and jax.process_index() == 0:
+        print(line)
     t0 = time.perf_counter()
     table = explore(space, args.out, quiet=args.quiet, log=print)
     if table is None:  # another process of a distributed run: process 0 writes
@@ -505,6 +575,9 @@ def _add_explore_parser(sub) -> None:
     d.add_argument("--coordinator", help="HOST:PORT of process 0 (with --num-processes, --process-id)")
     d.add_argument("--num-processes", type=int, help="number of processes")
     d.add_argument("--process-id", type=int, help="this process's index, 0 .. N-1")
+    d.add_argument("--coordinator-timeout", type=float, default=60.0, metavar="S",
+                   help="seconds to wait for the coordinator (process 0) to answer, and for every process "
+                        "to join, before giving up (default 60)")
     e.set_defaults(func=cmd_explore)
 # ---- end explore -------------------------------------------------------------------------------
 
@@ -565,13 +638,76 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
     print(f"tension-zones: warning: {_one_line(message)}", file=sys.stderr)
 
 
+#: After Ctrl-C, the seconds a command has to unwind (its ``finally`` blocks remove staged outputs)
+#: before :func:`_interrupt_watchdog` ends the process: Python sees the KeyboardInterrupt only between
+#: bytecodes, and a compiled JAX program or a NumPy call may not return for hours.
+INTERRUPT_GRACE_S = 2.0
+
+
+def _end_interrupted() -> None:
+    """The end of a command that did not stop by itself after Ctrl-C: its worker processes killed,
+    one line, exit status 130, without unwinding (staged outputs stay hidden: ``.partial-*``,
+    ``.NAME.*``)."""
+    import multiprocessing
+
+    for p in multiprocessing.active_children():
+        p.kill()
+    with contextlib.suppress(OSError):
+        os.write(2, b"tension-zones: interrupted\n")
+    os._exit(130)
+
+
+@contextlib.contextmanager
+def _interrupt_watchdog(grace: float = INTERRUPT_GRACE_S):
+    """Ctrl-C stops the command within ``grace`` seconds even while the main thread is inside a
+    compiled program: the C-level signal handler writes to a wake-up socket (``signal.set_wakeup_fd``),
+    which a thread watches; if the command has not ended ``grace`` seconds later, the thread ends it
+    (:func:`_end_interrupted`). Off where it cannot be set up (not the main thread)."""
+    import signal
+    import socket
+    import threading
+
+    try:
+        r, w = socket.socketpair()
+        w.setblocking(False)
+        old = signal.set_wakeup_fd(w.fileno())
+    except (ValueError, OSError):  # not the main thread of the main interpreter
+        yield
+        return
+    done = threading.Event()
+
+    def watch():
+        with r:
+            while (byte := r.recv(1)) and not done.is_set():
+                if byte[0] == signal.SIGINT and not done.wait(grace):
+                    _end_interrupted()
+
+    def unraisable(u, hook=sys.unraisablehook):
+        # Ctrl-C landing in a callback Python cannot raise from (JAX's garbage-collection hook) is
+        # not printed as "Exception ignored": the thread above ends the command
+        if not isinstance(u.exc_value, KeyboardInterrupt):
+            hook(u)
+
+    threading.Thread(target=watch, name="tension-zones-interrupt", daemon=True).start()
+    old_hook, sys.unraisablehook = sys.unraisablehook, unraisable
+    try:
+        yield
+    finally:
+        sys.unraisablehook = old_hook
+        done.set()
+        signal.set_wakeup_fd(old)
+        with contextlib.suppress(OSError):
+            w.send(b"\0")  # wakes the thread, which sees ``done`` and ends
+        w.close()
+
+
 def main(argv=None) -> int:
     import warnings
 
     parser = build_parser()
     args = parser.parse_args(argv)  # --help and usage errors (one line, status 2) exit here
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), _interrupt_watchdog():
             warnings.showwarning = _show_warning
             args.func(args)
     except (CLIError, ValueError, OSError) as e:  # OSError: missing, unreadable, unwritable files

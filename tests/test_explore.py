@@ -209,7 +209,7 @@ def test_interrupted_exploration_resumes_without_recomputing(tmp_path, monkeypat
     assert_tables_identical(resumed, whole)
     assert (tmp_path / "run" / "table.csv").read_text() == (tmp_path / "whole" / "table.csv").read_text()
     assert json.loads((tmp_path / "run" / "manifest.json").read_text())["complete"]
-    assert not list((tmp_path / "run").rglob(".tmp-*"))  # every file renamed into place
+    assert not list((tmp_path / "run").rglob(".*"))  # every file renamed into place, the lock released
 
 
 DISTRIBUTED = textwrap.dedent("""

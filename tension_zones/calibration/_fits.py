@@ -47,6 +47,8 @@ import sys
 
 import numpy as np
 
+from .._resources import cores
+
 #: Worker processes by default: one per core beyond the first, at most this many (a round has 4-10
 #: independent fits, and each worker holds its own programs: ~0.7 GB for the FTDCR v4 robot).
 MAX_WORKERS = 4
@@ -55,6 +57,13 @@ MAX_WORKERS = 4
 #: calibration, 2063 samples x 3 segments, and lengthens the 500-sample single-segment one;
 #: benchmarks/README.md).
 MIN_WORK = 1024
+#: A calibration's peak memory per process (the main one and each worker) is about
+#: ``MEMORY_BASE + MEMORY_PER_SAMPLE x samples x segments`` bytes: the compiled programs, then the
+#: Jacobians, the fits' intermediates and the structure test's shuffles, which grow with the samples.
+#: Fitted to the peak resident memory of single-segment recordings of 1000 to 8000 samples, the
+#: steepest slope between them kept.
+MEMORY_BASE = 0.75e9
+MEMORY_PER_SAMPLE = 126e3
 #: The loop's short refits, in Levenberg-Marquardt passes.
 SCREEN_ITERATIONS = 6
 #: An effect of the clock is judged on the recording's last this share (acquisition order), fitted
@@ -197,7 +206,7 @@ def worker_count(workers=None, work: int | None = None) -> int:
     the module) and the problem is large enough (``work``, its samples x segments, at least
     ``MIN_WORK``), else 0. A count asked for is capped at one per core beyond the first (at least
     one): a fit runs on about one core, so more only share the cores, each with its own programs."""
-    cap = max(_cores() - 1, 1)
+    cap = max(cores() - 1, 1)
     if workers is not None:
         if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 0:
             raise ValueError(f"workers must be a whole number, 0 or more, got {workers!r}")
@@ -213,19 +222,18 @@ def worker_count(workers=None, work: int | None = None) -> int:
     script = getattr(main, "__file__", None) is not None and getattr(main, "__spec__", None) is None
     if script and os.path.basename(sys.argv[0] or "") != "tension-zones":
         return 0  # a plain script: spawn would run its top level again in every worker
-    return max(0, min(_cores() - 1, MAX_WORKERS))
+    return max(0, min(cores() - 1, MAX_WORKERS))
 
 
-def _cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # (not Linux)
-        return os.cpu_count() or 1
+def peak_memory(work: int, workers: int = 0) -> float:
+    """Estimated peak memory (bytes) of a calibration of ``work`` samples x segments (the validation
+    file's samples too) with ``workers`` worker processes (``MEMORY_BASE``)."""
+    return (1 + workers) * (MEMORY_BASE + MEMORY_PER_SAMPLE * work)
 
 
 def spare_core() -> bool:
     """Whether this process may use more than one core."""
-    return _cores() > 1
+    return cores() > 1
 
 
 class Runner:
@@ -251,14 +259,21 @@ class Runner:
     def __enter__(self):
         return self
 
-    def __exit__(self, *exc):
-        self.close()
+    def __exit__(self, kind, *exc):
+        self.close(abort=kind is not None)
 
-    def close(self) -> None:
-        for t in self._threads:  # no compile may outlive the calibration (nor run at interpreter exit)
-            t.join()
+    def close(self, abort: bool = False) -> None:
+        """End the workers. ``abort`` (an error or Ctrl-C): without waiting for the compiles on threads
+        or the workers' jobs (a worker's fit may run for minutes, and the interpreter's exit would wait
+        for it), the workers are killed."""
+        if not abort:
+            for t in self._threads:  # no compile may outlive the calibration (nor run at interpreter exit)
+                t.join()
         self._threads = []
         if self.pool is not None:
+            procs = list((getattr(self.pool, "_processes", None) or {}).values()) if abort else []
+            for p in procs:
+                p.kill()
             self.pool.shutdown(wait=False, cancel_futures=True)
             self.pool = None
 

@@ -8,15 +8,12 @@ after the effects (``residual_vs_*.png``), and the measured against the predicte
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 import textwrap
 from pathlib import Path
 
 import numpy as np
 
-from .._io import save_figure
+from .._io import save_figure, staged_folder
 from ._fits import SCREEN_ITERATIONS, rmse
 from ._loop import EXCESS_RATIO, SECOND_LOOK_SHARE, STRUCTURE_Z, Result
 
@@ -135,12 +132,6 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
 
 def _save(fig, path: Path) -> None:
     save_figure(fig, path, dpi=110, format="png")
-
-
-def _write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _fmt_params(params: dict, std: dict | None = None) -> str:
@@ -322,19 +313,13 @@ def write_report(res: Result, out_dir, **extra) -> dict:
     ``extra`` keys (e.g. ``design``, ``validate``: the files used) go into the report as they are.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     report = res.to_json()
     report.update(extra)
     # every file is made in a hidden staging folder and moved in at the end: an interrupted run leaves
     # nothing that looks like a report (nor a plot that a rerun would refuse to overwrite)
-    stage = Path(tempfile.mkdtemp(dir=out, prefix=".partial-"))
-    try:
+    with staged_folder(out, last=("report.json", "report.md")) as stage:
         report["plots"] = [p.name for p in plot_residuals(res, stage)] + [plot_paths(res, stage).name]
         report = _jsonable(report)
-        _write_text(stage / "report.json", json.dumps(report, indent=1))
-        _write_text(stage / "report.md", markdown(report))
-        for f in [*report["plots"], "report.json", "report.md"]:
-            os.replace(stage / f, out / f)
-    finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        (stage / "report.json").write_text(json.dumps(report, indent=1))
+        (stage / "report.md").write_text(markdown(report))
     return report

@@ -12,15 +12,16 @@ of any two or three columns is :func:`pareto_front`.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
-import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import jax
 import numpy as np
 
+from .._io import LOCK_NAME, atomic_path, folder_lock, staged_folder
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
 from ..model._design import Design, read_json
@@ -122,14 +123,46 @@ def explore_designs(
 
 
 # --------------------------------------------------------------------------------------------
+# The work and memory of an exploration, said and checked before it starts
+# --------------------------------------------------------------------------------------------
+#: The memory of one compiled chunk, per local device, is about ``chunks.poses x (POSE_BYTES +
+#: POSE_BYTES_N2 x n^2)`` bytes for ``n`` wires (the designs are mapped one after the other: the
+#: poses of one step are what is held at once; XLA's memory analysis of the program, 3 to 16 wires,
+#: with and without a load, kept above it), plus ``chunks.designs x DESIGN_BYTES`` on the host (the
+#: chunk's designs and results, with room).
+POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
+
+
+def chunk_memory(space: Space, n: int) -> int:
+    """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``)."""
+    devices = len(jax.local_devices())
+    return (devices * space.poses_per_chunk * (POSE_BYTES + POSE_BYTES_N2 * n * n)
+            + space.designs_per_chunk * DESIGN_BYTES)
+
+
+def plan(space: Space) -> str:
+    """The work of exploring ``space``, in one line; raises a one-line ``ValueError`` where a chunk's
+    memory estimate (:func:`chunk_memory`) is more than the machine has (``tension_zones._resources``)."""
+    from .._resources import check_memory, gb
+
+    n = max(space.n_wires)
+    check_memory(chunk_memory(space, n), f"a chunk of {space.designs_per_chunk:,} designs x "
+                 f"{space.poses_per_chunk:,} poses of {n} wires",
+                 "lower the space's \"chunks\" (\"poses\": the poses per step)")
+    designs = sum(space.count(k) for k in space.n_wires)
+    poses = space.theta_L.size * space.delta.size
+    chunks = sum(-(-space.count(k) // space.designs_per_chunk) for k in space.n_wires)
+    return (f"exploring {designs:,} designs x {poses:,} poses = {designs * poses:.3g} design-poses in "
+            f"{chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)")
+
+
+# --------------------------------------------------------------------------------------------
 # The output folder: manifest, chunk files, table
 # --------------------------------------------------------------------------------------------
 def _write_atomic(path: Path, write: Callable[[Path], None]) -> None:
-    """Write through a temporary file (same suffix: NumPy keeps the name) and rename it: a file is
-    either complete or absent."""
-    tmp = path.with_name(".tmp-" + path.name)
-    write(tmp)
-    os.replace(tmp, path)
+    """``write(tmp)`` through :func:`~tension_zones._io.atomic_path`: a file is either complete or absent."""
+    with atomic_path(path) as tmp:
+        write(tmp)
 
 
 def _first_difference(a: dict, b: dict) -> str | None:
@@ -149,6 +182,27 @@ class _Store:
         ident = {"format": FORMAT, "space": space.raw, "columns": list(columns)}
         if self.out.exists() and not self.out.is_dir():
             raise ValueError(f"the output folder {str(self.out)!r} is a file")
+        fresh = not self.out.exists()
+        self._lock = contextlib.ExitStack()  # held until :meth:`release`: one exploration per folder
+        try:
+            self.out.mkdir(parents=True, exist_ok=True)
+            self._lock.enter_context(folder_lock(self.out, "explore"))
+        except OSError as e:
+            if fresh:
+                with contextlib.suppress(OSError):
+                    self.out.rmdir()
+            raise ValueError(f"cannot write the output folder {str(self.out)!r}: {e.strerror or e}") from None
+        try:
+            self._open(space, ident, log)
+        except BaseException:
+            self.release()
+            raise
+
+    def release(self) -> None:
+        """Give the folder's lock back."""
+        self._lock.close()
+
+    def _open(self, space: Space, ident: dict, log) -> None:
         if self.manifest_path.exists():
             self.manifest = read_json(self.manifest_path, "exploration manifest")
             old = {k: self.manifest.get(k) for k in ident}
@@ -161,7 +215,7 @@ class _Store:
             if log:
                 log(f"resuming the exploration in {str(self.out)!r}: {done} of "
                     f"{self.manifest['chunks_total']} chunks done")
-        elif self.out.exists() and any(self.out.iterdir()):
+        elif any(p.name != LOCK_NAME for p in self.out.iterdir()):
             raise ValueError(f"the output folder {str(self.out)!r} is not empty and holds no "
                              "exploration; refusing to overwrite it")
         else:
@@ -252,7 +306,16 @@ def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[st
     ``manifest.json``, ``chunks/``, ``table.npz`` and ``table.csv`` there (process 0 writes).
     """
     columns = [s[0] for s in _stats(space.load is not None)]
+    plan(space)  # a chunk too large for the machine is refused before anything is written
     store = None if out is None else _open_store(out, space, columns, log)
+    try:
+        return _explore(space, store, quiet)
+    finally:
+        if store is not None:
+            store.release()
+
+
+def _explore(space: Space, store: _Store | None, quiet: bool):
     first = jax.process_index() == 0
     parts = []
     for n in space.n_wires:
@@ -359,11 +422,12 @@ def write_front(table: dict[str, np.ndarray], out, columns: Sequence[str]) -> li
 
     out = Path(out)
     on = pareto_front(table, columns)
-    paths = [out / "front.csv", out / "front.png", out / "parallel.png"]
-    write_csv({k: v[on] for k, v in table.items()}, paths[0])
-    plot_front(table, columns, on, paths[1])
-    plot_parallel(table, columns, on, paths[2])
-    return paths
+    names = ["front.csv", "front.png", "parallel.png"]
+    with staged_folder(out) as stage:
+        write_csv({k: v[on] for k, v in table.items()}, stage / names[0])
+        plot_front(table, columns, on, stage / names[1])
+        plot_parallel(table, columns, on, stage / names[2])
+    return [out / n for n in names]
 
 
 def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]) -> str:

@@ -499,18 +499,17 @@ OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
 
 def write_outputs(result: dict[str, Any], out_dir) -> list:
     """``result.json`` (without the history; figures not computed are ``null``), ``tradeoff.png`` and
-    ``convergence.png``; each file appears complete or not at all (:func:`tension_zones._io.atomic_path`)."""
+    ``convergence.png``, made in a staging folder and moved in together, ``result.json`` last
+    (:func:`tension_zones._io.staged_folder`): an interrupted write leaves none of them."""
     from pathlib import Path
 
-    from .._io import atomic_path, write_json
+    from .._io import staged_folder, write_json
     from ..plots import plot_convergence, plot_tradeoff
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     paths = [out / name for name in OUTPUT_FILES]
-    write_json(paths[0], {k: v for k, v in result.items() if k != "history"})
-    with atomic_path(paths[1]) as tmp:
-        plot_tradeoff(result, tmp)
-    with atomic_path(paths[2]) as tmp:
-        plot_convergence(result, tmp, INFEASIBLE_RANK)
+    with staged_folder(out, last=OUTPUT_FILES[:1]) as stage:
+        write_json(stage / OUTPUT_FILES[0], {k: v for k, v in result.items() if k != "history"})
+        plot_tradeoff(result, stage / OUTPUT_FILES[1])
+        plot_convergence(result, stage / OUTPUT_FILES[2], INFEASIBLE_RANK)
     return paths
