@@ -156,8 +156,9 @@ def cmd_reproduce(args) -> None:
 
 # --- optimize -----------------------------------------------------------------------
 def cmd_optimize(args) -> None:
-    from .design._optimise import OUTPUT_FILES, optimize, write_outputs
+    from .design._optimise import optimize
     from .design._scenario import load_scenario
+    from .plots import OUTPUT_FILES, write_outputs
 
     try:
         sc = load_scenario(args.scenario)
@@ -537,8 +538,9 @@ def cmd_explore(args) -> None:
 
     import jax
 
-    from .design._explore import check_front, default_front, explore, plan, summary, write_front
+    from .design._explore import check_front, default_front, explore, plan, summary
     from .design._space import load_space
+    from .plots import write_front
 
     _init_distributed(args)
     space = load_space(args.space)

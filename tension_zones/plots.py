@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -27,6 +30,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Wedge
 
+from ._io import staged_folder, write_json
+from .design._explore import STATS, UNITS, objective, pareto_front, write_csv
+from .design._optimise import INFEASIBLE_RANK
 from .model._zones import TensionMap
 
 
@@ -189,8 +195,6 @@ def plot_convergence(result: dict, path, infeasible_rank: float):
 # ---- design-space exploration --------------------------------------------------------
 def _label(column: str) -> str:
     """An exploration column (``name``, ``min:name`` or ``max:name``) with its unit and which way is better."""
-    from .design._explore import UNITS, objective
-
     name, best = objective(column)
     unit = next((u for k, u in UNITS.items() if name.startswith(k)), "")
     unit = {"mm": " (mm)", "rad": " (rad)", "deg": " (deg)"}.get(unit, "")
@@ -209,8 +213,6 @@ def plot_front(table: dict, columns, front, path=None):
     per design, black-edged), for two columns (one scatter, the front joined as a staircase) or three
     (the three pairs side by side); ``min:``/``max:`` prefixes as in ``pareto_front``. Saves to
     ``path`` if given; returns the figure."""
-    from .design._explore import objective
-
     labels, columns = list(columns), [objective(c)[0] for c in columns]
     pairs = [(0, 1)] if len(columns) == 2 else [(0, 1), (0, 2), (1, 2)]
     fig, axes = plt.subplots(1, len(pairs), figsize=(5.6 * len(pairs), 4.6), squeeze=False)
@@ -249,8 +251,6 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
     ``columns``, each axis scaled to its range (ends labelled). Front designs are coloured by wire
     count, the others grey (at most ``max_lines`` of them, evenly picked). Returns the figure."""
     from matplotlib.collections import LineCollection
-
-    from .design._explore import STATS, objective
 
     columns = [objective(c)[0] for c in columns]
     def varies(v):
@@ -292,3 +292,34 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
         fig.savefig(path, dpi=120)
         plt.close(fig)
     return fig
+
+
+def write_front(table: dict[str, np.ndarray], out, columns: Sequence[str]) -> list[Path]:
+    """``front.csv`` (the front's rows), ``front.png`` (scatter with the front) and
+    ``parallel.png`` (parallel coordinates) in ``out``; returns their paths."""
+    out = Path(out)
+    on = pareto_front(table, columns)
+    names = ["front.csv", "front.png", "parallel.png"]
+    with staged_folder(out) as stage:
+        write_csv({k: v[on] for k, v in table.items()}, stage / names[0])
+        plot_front(table, columns, on, stage / names[1])
+        plot_parallel(table, columns, on, stage / names[2])
+    return [out / n for n in names]
+
+
+# ---- the design commands' output folders ----------------------------------------------
+#: The files :func:`write_outputs` writes into its folder.
+OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
+
+
+def write_outputs(result: dict[str, Any], out_dir) -> list:
+    """``result.json`` (without the history; figures not computed are ``null``), ``tradeoff.png`` and
+    ``convergence.png``, made in a staging folder and moved in together, ``result.json`` last
+    (:func:`tension_zones._io.staged_folder`): an interrupted write leaves none of them."""
+    out = Path(out_dir)
+    paths = [out / name for name in OUTPUT_FILES]
+    with staged_folder(out, last=OUTPUT_FILES[:1]) as stage:
+        write_json(stage / OUTPUT_FILES[0], {k: v for k, v in result.items() if k != "history"})
+        plot_tradeoff(result, stage / OUTPUT_FILES[1])
+        plot_convergence(result, stage / OUTPUT_FILES[2], INFEASIBLE_RANK)
+    return paths

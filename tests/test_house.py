@@ -195,3 +195,56 @@ def test_every_file_named_in_code_and_pages_exists():
             if not ok:
                 found.add(f"{path.relative_to(ROOT)}: {token}")
     assert sorted(found) == []
+
+
+def _imports(path: Path, module: str) -> set[str]:
+    """The package modules ``module`` (file ``path``) imports, at any depth of its code (a function's
+    lazy import too): ``tension_zones.a.b`` names, a name imported from a package counted as its module
+    where one exists."""
+    import ast
+
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.startswith("tension_zones")}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                parts = package.split(".")
+                base = ".".join(parts[:len(parts) - node.level + 1] + ([node.module] if node.module else []))
+            elif (node.module or "").startswith("tension_zones"):
+                base = node.module
+            else:
+                continue
+            subs = {f"{base}.{a.name}" for a in node.names}
+            out |= {s for s in subs if _module_file(s) is not None} or {base}
+    return out - {module}
+
+
+def _module_file(name: str) -> Path | None:
+    p = ROOT.joinpath(*name.split("."))
+    return next((f for f in (p.with_suffix(".py"), p / "__init__.py") if f.is_file()), None)
+
+
+def test_no_import_cycle_between_modules():
+    """Data flow one way (model -> analysis -> design, calibration -> report, plots, CLI): no module
+    imports, even lazily inside a function, one that imports it back (a package's ``__init__`` aside,
+    which re-exports its own modules)."""
+    files = {".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): f
+             for f in (ROOT / "tension_zones").rglob("*.py")}
+    graph = {m: {t for t in _imports(f, m) if t in files and not m.startswith(t + ".")} for m, f in files.items()}
+    cycles, state = [], {}
+
+    def visit(m, stack):
+        state[m] = 1
+        for t in graph[m]:
+            if state.get(t) == 1:
+                cycles.append(stack[stack.index(t):] + [t])
+            elif t not in state:
+                visit(t, stack + [t])
+        state[m] = 2
+
+    for m in graph:
+        if m not in state:
+            visit(m, [m])
+    assert cycles == []

@@ -1,8 +1,8 @@
 """Design: scenario files and the design optimiser; design spaces and their exploration."""
 
 from .. import _config  # noqa: F401  (float64 before any array is made)
-from ._explore import STATS, explore, explore_designs, pareto_front, write_front
-from ._optimise import evaluate_design, optimize, spread, write_outputs
+from ._explore import STATS, explore, explore_designs, pareto_front
+from ._optimise import evaluate_design, optimize, spread
 from ._scenario import DEFAULTS, Scenario, load_scenario, parse_scenario
 from ._space import Space, halton, load_space, parse_space
 
@@ -22,6 +22,4 @@ __all__ = [
     "parse_scenario",
     "parse_space",
     "spread",
-    "write_front",
-    "write_outputs",
 ]

@@ -21,7 +21,7 @@ from pathlib import Path
 import jax
 import numpy as np
 
-from .._io import LOCK_NAME, atomic_path, folder_lock, staged_folder
+from .._io import LOCK_NAME, atomic_path, folder_lock
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
 from ..model._design import Design, read_json
@@ -413,21 +413,6 @@ def default_front(space: Space) -> list[str]:
     wires, so a front of statistics only often holds one design per wire count.)"""
     third = "deflection_mm_reduced_worst" if space.load is not None else "controllable_fraction"
     return ["pitch_radius_mm", "dp_max_reduced_worst", third]
-
-
-def write_front(table: dict[str, np.ndarray], out, columns: Sequence[str]) -> list[Path]:
-    """``front.csv`` (the front's rows), ``front.png`` (scatter with the front) and
-    ``parallel.png`` (parallel coordinates) in ``out``; returns their paths."""
-    from ..plots import plot_front, plot_parallel
-
-    out = Path(out)
-    on = pareto_front(table, columns)
-    names = ["front.csv", "front.png", "parallel.png"]
-    with staged_folder(out) as stage:
-        write_csv({k: v[on] for k, v in table.items()}, stage / names[0])
-        plot_front(table, columns, on, stage / names[1])
-        plot_parallel(table, columns, on, stage / names[2])
-    return [out / n for n in names]
 
 
 def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]) -> str:

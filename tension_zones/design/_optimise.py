@@ -491,25 +491,3 @@ def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     _, exact, pieces = _objective_jit(
         design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
     return _result_row(sc, design.n_wires, design, exact, pieces)
-
-
-#: The files :func:`write_outputs` writes into its folder.
-OUTPUT_FILES = ("result.json", "tradeoff.png", "convergence.png")
-
-
-def write_outputs(result: dict[str, Any], out_dir) -> list:
-    """``result.json`` (without the history; figures not computed are ``null``), ``tradeoff.png`` and
-    ``convergence.png``, made in a staging folder and moved in together, ``result.json`` last
-    (:func:`tension_zones._io.staged_folder`): an interrupted write leaves none of them."""
-    from pathlib import Path
-
-    from .._io import staged_folder, write_json
-    from ..plots import plot_convergence, plot_tradeoff
-
-    out = Path(out_dir)
-    paths = [out / name for name in OUTPUT_FILES]
-    with staged_folder(out, last=OUTPUT_FILES[:1]) as stage:
-        write_json(stage / OUTPUT_FILES[0], {k: v for k, v in result.items() if k != "history"})
-        plot_tradeoff(result, stage / OUTPUT_FILES[1])
-        plot_convergence(result, stage / OUTPUT_FILES[2], INFEASIBLE_RANK)
-    return paths
