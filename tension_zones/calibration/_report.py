@@ -144,7 +144,14 @@ def _f(x, nd=4):
 
 
 def markdown(report: dict) -> str:
-    nf = report["noise_floor_mm"]
+    """``report.md``: the summary, before and after, what was found, the evidence round by round, the
+    structure left, the final parameters and the plots."""
+    lines = (_md_summary(report) + _md_before_after(report) + _md_found(report) + _md_evidence(report)
+             + _md_structure(report) + _md_parameters(report))
+    return "\n".join(lines) + "\n"
+
+
+def _md_summary(report: dict) -> list[str]:
     val = "rmse_validate_mm" in report
     lines = [f"# Calibration report: `{Path(report['data']).name}`", ""]
     lines += [f"{report['n_samples']} samples ({report['dropped_rows']} bad rows dropped); training: "
@@ -166,6 +173,13 @@ def markdown(report: dict) -> str:
                    f"there {reg['rmse_mm']:.3f} mm, {reg['explained']:.1%} of the tip motion's variance explained. "
                    "Positions and frame parameters below are in that frame; `measurement_frame` in report.json "
                    "is the whole transform."), ""]
+    return lines
+
+
+def _md_before_after(report: dict) -> list[str]:
+    nf = report["noise_floor_mm"]
+    val = "rmse_validate_mm" in report
+    lines: list[str] = []
     lines += ["## Before and after (tip-position RMSE, mm)", "",
               "| model | held out | / noise floor |" + (" validation | validation, mean offset removed |" if val else ""),
               "| --- | ---: | ---: |" + (" ---: | ---: |" if val else ""),
@@ -191,6 +205,11 @@ def markdown(report: dict) -> str:
             lines.append(f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
                          f"{_f(b['rmse_validate_aligned_mm'])} |")
         lines.append("")
+    return lines
+
+
+def _md_found(report: dict) -> list[str]:
+    lines: list[str] = []
     lines += ["## What was found", ""]
     if report["effects"]:
         for e in report["effects"]:
@@ -206,75 +225,93 @@ def markdown(report: dict) -> str:
     if c["pairs"]:
         lines += ["Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
                   + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + ".", ""]
+    return lines
+
+
+def _md_evidence(report: dict) -> list[str]:
+    lines: list[str] = []
     lines += ["## Evidence", "",
               ("Score test on the held-out residual (z-value of the chi-square statistic of the residual "
               "projected on the effect's parameter sensitivities; higher = explains more), then the "
               "refit on the training part and the held-out check:"), ""]
     for rd in report["rounds"]:
-        sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
-        lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
-                     + ", ".join(f"{c['name']} {c['score']:.1f}" if "not_scored" not in c
-                                 else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
-        lines.append("")
-        screened = [c for c in sc if "screened_rmse_mm" in c]
-        if any(c.get("second_look") for c in sc):
-            lines.append("- no score significant, the held-out residual above the noise floor and not noise: a second "
-                         "look, short refits of the best-scoring candidates (a score is first order); one is "
-                         f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess")
-        if screened:
-            lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
-                         f"{rd['rmse_held_out_mm']:.4f} mm): "
-                         + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
-                                     + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
-                                     for c in screened))
-        la, jl = rd.get("look_ahead"), rd.get("joint_look")
-        for t in rd["tried"]:
-            verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
-                                                    else "not significant")
-            if t.get("short_of_share"):
-                verdict = (f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
-                           f"short of the {t['share_needed']:.1%} one effect needs"
-                           + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else ""))
-            elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
-                verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
-            if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
-                verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
-            lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
-                         f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
-                         f"{t['needed']:.1f})"
-                         + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
-                         + (f", of the later samples' {t['sse_drop_later']:.1f} (fitted on the earlier ones)"
-                            if "sse_drop_later" in t else "")
-                         + f" -> {verdict}")
-        if la:
-            a, b = la["branches"]
-            line = (f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
-                    f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} first it ends "
-                    f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; ")
-            if "behind_after_round" in b:
-                line += (f"with {b['first']} first it was behind after round {b['behind_after_round']} "
-                         f"({b['rmse_held_out_mm']:.4f} mm) and was given up")
-            else:
-                line += (f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
-                         f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
-            lines.append(line + f" -> the branch of **{la['kept']}** is kept")
-        if jl:
-            lines.append(
-                f"- nothing kept on its own, the loop far above the noise floor with structure left: a joint look went on "
-                f"from {jl['first']} with refits that need no share of the excess of their own (every other test "
-                f"stands). It adds {', '.join(jl['added']) or 'nothing'}"
-                + (f" and removes {', '.join(jl['removed'])}" if jl["removed"] else "")
-                + f": held-out RMSE {jl['rmse_held_out_mm']:.4f} mm, {jl['share_held_out']:.1%} of the excess "
-                f"(needed {jl['share_needed']:.0%}), drop {jl['sse_drop']:.1f} (needed {jl['needed']:.1f}) -> "
-                + ("**kept**" if jl["kept"] else "not kept"))
-        for t in rd.get("removed", []):
-            lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
-                         f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
-                         "effect and is removed")
-        if not rd["tried"]:
-            lines.append("- no short refit lowered the held-out error: the loop stops." if screened
-                         else "- no candidate significant: the loop stops.")
-        lines.append("")
+        lines += _md_round(report, rd)
+    return lines
+
+
+def _md_round(report: dict, rd: dict) -> list[str]:
+    """One round: its scores, short refits, refits and their verdicts, look-ahead, joint look and
+    backward step."""
+    lines: list[str] = []
+    sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
+    lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
+                 + ", ".join(f"{c['name']} {c['score']:.1f}" if "not_scored" not in c
+                             else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
+    lines.append("")
+    screened = [c for c in sc if "screened_rmse_mm" in c]
+    if any(c.get("second_look") for c in sc):
+        lines.append("- no score significant, the held-out residual above the noise floor and not noise: a second "
+                     "look, short refits of the best-scoring candidates (a score is first order); one is "
+                     f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess")
+    if screened:
+        lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
+                     f"{rd['rmse_held_out_mm']:.4f} mm): "
+                     + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
+                                 + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
+                                 for c in screened))
+    la, jl = rd.get("look_ahead"), rd.get("joint_look")
+    for t in rd["tried"]:
+        verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
+                                                else "not significant")
+        if t.get("short_of_share"):
+            verdict = (f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
+                       f"short of the {t['share_needed']:.1%} one effect needs"
+                       + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else ""))
+        elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
+            verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
+        if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
+            verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
+        lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
+                     f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
+                     f"{t['needed']:.1f})"
+                     + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
+                     + (f", of the later samples' {t['sse_drop_later']:.1f} (fitted on the earlier ones)"
+                        if "sse_drop_later" in t else "")
+                     + f" -> {verdict}")
+    if la:
+        a, b = la["branches"]
+        line = (f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
+                f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} first it ends "
+                f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; ")
+        if "behind_after_round" in b:
+            line += (f"with {b['first']} first it was behind after round {b['behind_after_round']} "
+                     f"({b['rmse_held_out_mm']:.4f} mm) and was given up")
+        else:
+            line += (f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
+                     f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
+        lines.append(line + f" -> the branch of **{la['kept']}** is kept")
+    if jl:
+        lines.append(
+            f"- nothing kept on its own, the loop far above the noise floor with structure left: a joint look went on "
+            f"from {jl['first']} with refits that need no share of the excess of their own (every other test "
+            f"stands). It adds {', '.join(jl['added']) or 'nothing'}"
+            + (f" and removes {', '.join(jl['removed'])}" if jl["removed"] else "")
+            + f": held-out RMSE {jl['rmse_held_out_mm']:.4f} mm, {jl['share_held_out']:.1%} of the excess "
+            f"(needed {jl['share_needed']:.0%}), drop {jl['sse_drop']:.1f} (needed {jl['needed']:.1f}) -> "
+            + ("**kept**" if jl["kept"] else "not kept"))
+    for t in rd.get("removed", []):
+        lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
+                     f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
+                     "effect and is removed")
+    if not rd["tried"]:
+        lines.append("- no short refit lowered the held-out error: the loop stops." if screened
+                     else "- no candidate significant: the loop stops.")
+    lines.append("")
+    return lines
+
+
+def _md_structure(report: dict) -> list[str]:
+    lines: list[str] = []
     lines += [("Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
               f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):"), "",
               "| input | variance explained | z |", "| --- | ---: | ---: |"]
@@ -285,6 +322,11 @@ def markdown(report: dict) -> str:
     ex = report["structure"]["excess_over_noise"]
     lines += [f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
               f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
+    return lines
+
+
+def _md_parameters(report: dict) -> list[str]:
+    lines: list[str] = []
     lines += ["## Final parameters", "",
               ("`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
               "in report units (the refit on every sample); `std`: linearised standard deviations from that fit (optimistic: "
@@ -292,7 +334,7 @@ def markdown(report: dict) -> str:
               "", "## Plots", ""]
     for f in report["plots"]:
         lines.append(f"![{f}]({f})")
-    return "\n".join(lines) + "\n"
+    return lines
 
 
 def _jsonable(x):
