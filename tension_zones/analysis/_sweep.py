@@ -420,6 +420,29 @@ def _done_everywhere(is_done):
     return np.asarray(multihost_utils.broadcast_one_to_all(is_done.astype(np.int32))).astype(bool)
 
 
+def _batch_and_grid(designs, theta_L, delta) -> tuple[Design, np.ndarray, np.ndarray]:
+    """A batch of designs (NumPy leaves with a leading axis) and a grid's axes (non-empty, 1-D), checked."""
+    if not isinstance(designs, Design) or np.ndim(designs.length) != 1:
+        raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis "
+                        "(a batch of designs)")
+    th, de = (np.asarray(x, dtype=float) for x in (theta_L, delta))
+    if th.ndim != 1 or de.ndim != 1 or th.size == 0 or de.size == 0:
+        raise ValueError(f"theta_L and delta must be non-empty 1-D grids, got shapes {th.shape} and {de.shape}")
+    return jax.tree_util.tree_map(np.asarray, designs), th, de
+
+
+def _resumed(done, n_designs: int, D: int, S: int) -> tuple[np.ndarray, np.ndarray]:
+    """The results table (n_designs, S), NaN but for the rows of ``done`` (chunk index -> its rows),
+    and which of the chunks of ``D`` designs are done."""
+    results, is_done = np.full((n_designs, S), np.nan), np.zeros(-(-n_designs // D), bool)
+    for c, rows in (done or {}).items():
+        a, b = c * D, min(c * D + D, n_designs)
+        if not 0 <= c < is_done.size or np.shape(rows) != (b - a, S):
+            raise ValueError(f"done chunk {c}: expected {b - a} x {S} results, got shape {np.shape(rows)}")
+        results[a:b], is_done[c] = rows, True
+    return results, is_done
+
+
 def sweep_designs(
     fn: Callable,
     designs: Design,
@@ -468,28 +491,17 @@ def sweep_designs(
 
     Returns ``{name: (N,) array}`` on process 0, ``None`` on the other processes.
     """
-    if not isinstance(designs, Design) or np.ndim(designs.length) != 1:
-        raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis "
-                        "(a batch of designs)")
+    designs, th, de = _batch_and_grid(designs, theta_L, delta)
     D = positive_int("designs_per_chunk", designs_per_chunk)
     P = positive_int("poses_per_chunk", poses_per_chunk)
-    th, de = (np.asarray(x, dtype=float) for x in (theta_L, delta))
-    if th.ndim != 1 or de.ndim != 1 or th.size == 0 or de.size == 0:
-        raise ValueError(f"theta_L and delta must be non-empty 1-D grids, got shapes {th.shape} and {de.shape}")
-    designs = jax.tree_util.tree_map(np.asarray, designs)
     stats = _check_stats(fn, designs, args, stats)
     n_designs, S = designs.length.shape[0], len(stats)
     n_chunks = -(-n_designs // D)
     first = jax.process_index() == 0
     nproc = jax.process_count()
 
-    results: Any = np.full((n_designs, S), np.nan) if first else None
-    is_done = np.zeros(n_chunks, bool)
-    for c, rows in (done or {}).items() if first else ():
-        a, b = c * D, min(c * D + D, n_designs)
-        if not 0 <= c < n_chunks or np.shape(rows) != (b - a, S):
-            raise ValueError(f"done chunk {c}: expected {b - a} x {S} results, got shape {np.shape(rows)}")
-        results[a:b], is_done[c] = rows, True
+    results: Any
+    results, is_done = _resumed(done, n_designs, D, S) if first else (None, np.zeros(n_chunks, bool))
     pending = np.flatnonzero(~_done_everywhere(is_done))
     mine = pending[jax.process_index()::nproc]
     n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
