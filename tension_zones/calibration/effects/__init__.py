@@ -36,9 +36,10 @@ NOMINAL = {"base": ("backbone_EI",), "tracker": ("backbone_EI", "pattern_rotatio
 #: Not candidates either: in the base frame the offset is part of the registration.
 EXCLUDED = {"base": ("offset",), "tracker": ()}
 #: Candidates only where asked for (``library(frame, opt_in=...)``, the CLI's ``--effects +NAME``): a
-#: model with the bending's memory solves the whole recording at every evaluation, so a calibration
-#: that scores it (beside the rod, which the loop scores every round on a multi-segment robot) takes
-#: several times as long, for a small gain where the loop names it.
+#: model with the bending's memory solves the whole recording at every evaluation and measures the
+#: play in the stiffness of the backbone and the taut wires, whose derivative in every parameter
+#: (third derivatives of the energy) is most of its cost; every refit after it is named runs that
+#: model, so a calibration that names it takes several times as long, for a small gain.
 OPT_IN = ("bending_friction",)
 BY_NAME = {e.name: e for e in ALL}
 
