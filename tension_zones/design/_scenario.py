@@ -175,16 +175,24 @@ def _merge(key, given, default, kind="scenario"):
     return {**default, **given}
 
 
+def with_defaults(d, defaults: dict, kind: str, what: str, objects=()) -> dict:
+    """A file's top-level object ``d`` over a deep copy of ``defaults``: an object (a ValueError, like
+    every bad file: the command line reports it in one line), no unknown key, the keys ``objects``
+    merged into their default objects (:func:`_merge`), the others copied."""
+    if not isinstance(d, dict):
+        raise ValueError(f"{what} must be a JSON object, got {type(d).__name__}")
+    unknown = sorted(set(d) - set(defaults))
+    if unknown:
+        raise ValueError(f"unknown {kind} key(s) {unknown}; known: {sorted(defaults)}")
+    out = copy.deepcopy(defaults)
+    for k, v in d.items():
+        out[k] = _merge(k, v, defaults[k], kind) if k in objects else copy.deepcopy(v)
+    return out
+
+
 def parse_scenario(d: dict) -> Scenario:
     """Validate a scenario dictionary and fill in the defaults."""
-    if not isinstance(d, dict):
-        raise ValueError(f"a scenario must be a JSON object, got {type(d).__name__}")
-    unknown = sorted(set(d) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown scenario key(s) {unknown}; known: {sorted(DEFAULTS)}")
-    s = copy.deepcopy(DEFAULTS)
-    for k, v in d.items():
-        s[k] = _merge(k, v, DEFAULTS[k]) if isinstance(DEFAULTS[k], dict) else v
+    s = with_defaults(d, DEFAULTS, "scenario", "a scenario", [k for k, v in DEFAULTS.items() if isinstance(v, dict)])
 
     counts = _wire_counts("n_wires", s["n_wires"])
     c = s["constraints"]

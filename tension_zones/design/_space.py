@@ -11,7 +11,6 @@ edge (radians inside).
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import json
 import math
@@ -29,7 +28,7 @@ from ..model._design import (
     _check_radius,
     read_json,
 )
-from ._scenario import _err, _grid, _merge, _num, _wire_counts
+from ._scenario import _err, _grid, _merge, _num, _wire_counts, with_defaults
 
 KIND = "space"
 #: The design fields a space can vary, by their design-file names (tension_zones/MODEL.md Sec. 6): the Design
@@ -238,15 +237,7 @@ def _sample(given: Any) -> tuple[str, int, int]:
 
 def parse_space(d: dict) -> Space:
     """Validate a space dictionary and fill in the defaults."""
-    if not isinstance(d, dict):
-        # a ValueError, like every bad space: the command line reports those as one line
-        raise ValueError(f"a design space must be a JSON object, got {type(d).__name__}")
-    unknown = sorted(set(d) - set(DEFAULTS))
-    if unknown:
-        raise ValueError(f"unknown space key(s) {unknown}; known: {sorted(DEFAULTS)}")
-    raw = copy.deepcopy(DEFAULTS)
-    for k, v in d.items():
-        raw[k] = _merge(k, v, DEFAULTS[k], KIND) if k == "chunks" else copy.deepcopy(v)
+    raw = with_defaults(d, DEFAULTS, KIND, "a design space", ("chunks",))
 
     counts = _wire_counts("n_wires", raw["n_wires"], KIND)
     fields = {k: _field(k, raw[k], lo, lo_open) for k, (_, lo, lo_open) in FIELDS.items()}
