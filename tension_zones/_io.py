@@ -36,6 +36,10 @@ def atomic_path(path):
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would make outputs private
         os.replace(tmp, path)
+    except OSError as e:  # a full disk, say: name the file the user asked for, not the hidden one
+        if e.filename in (None, tmp):
+            raise OSError(e.errno, e.strerror or str(e), str(path)) from e
+        raise
     finally:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
@@ -55,6 +59,10 @@ def staged_folder(out, last=()):
         names = sorted(p.name for p in stage.iterdir())
         for name in [n for n in names if n not in last] + [n for n in last if n in names]:
             os.replace(stage / name, out / name)
+    except OSError as e:  # name the output the user asked for, not its place in the stage
+        if isinstance(e.filename, str) and Path(e.filename).parent == stage:
+            raise OSError(e.errno, e.strerror or str(e), str(out / Path(e.filename).name)) from e
+        raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
 

@@ -445,6 +445,12 @@ API = [
      "pitch_radius_mm 50 mm is more than half the length_mm 20 mm"),
     ("space-radius-over-half-length", lambda: tz.parse_space({"length_mm": [20, 40], "pitch_radius_mm": [1, 15]}),
      "space key 'pitch_radius_mm': max 15 mm is more than half the min length_mm 20 mm"),
+    ("space-halton-too-many", lambda: tz.parse_space({"length_mm": [15, 25], "sample": {"method": "halton",
+                                                                                         "designs": 10**9}}),
+     "space key 'sample.designs': 1e+09 designs for 3 wires, more than 1e+07: fewer designs"),
+    ("space-grid-too-many", lambda: tz.parse_space({"length_mm": [15, 25], "pitch_radius_mm": [1, 3],
+                                                    "preload_N": [0, 5], "sample": {"points": 4000}}),
+     "the grid has 6.4e+10 designs for 3 wires, more than 1e+07: fewer points, or method \"halton\""),
     ("robot-routing-shares-a-hole", lambda: tz.Robot.from_dict({"segments": [
         {"n_wires": 3, "length_mm": 40, "pitch_radius_mm": 3},
         {"n_wires": 3, "length_mm": 30, "pitch_radius_mm": 3, "wire_angles_deg": [60, 180, 300],
@@ -543,3 +549,26 @@ def test_the_command_line_shows_a_warning_as_one_line(tmp_path, capsys, monkeypa
     assert main(["maps", "--wires", "3", "--out", str(tmp_path / "m.png")]) == 0
     err = capsys.readouterr().err
     assert err == "tension-zones: warning: first line second line\n", err
+
+
+def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path, monkeypatch, capsys):
+    """A write that fails for want of space (``ENOSPC``, raised without a file name as NumPy's writers
+    do) is one line naming the output, and leaves no file, hidden or not; the rerun works."""
+    import errno
+
+    from tension_zones.cli import main
+
+    scenario = tmp_path / "s.scenario.json"
+    scenario.write_text(json.dumps({"n_wires": 3, "optimizer": {"steps": 2, "starts": 1}}))
+    out = tmp_path / "o"
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with monkeypatch.context() as m:
+        m.setattr("pathlib.Path.write_text", full)
+        assert main(["optimize", "--scenario", str(scenario), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"tension-zones: error: [Errno 28] No space left on device: {str(out / 'result.json')!r}"
+    assert "\n" not in err and list(out.iterdir()) == []
+    assert main(["optimize", "--scenario", str(scenario), "--out", str(out), "--quiet"]) == 0

@@ -273,6 +273,9 @@ def parse_space(d: dict) -> Space:
     )
     for n in counts:
         if space.count(n) > MAX_DESIGNS:
+            if method == "halton":
+                raise _err("sample.designs", f"{space.count(n):.3g} designs for {n} wires, more than "
+                                             f"{MAX_DESIGNS:.0e}: fewer designs", KIND)
             raise _err("sample", f"the grid has {space.count(n):.3g} designs for {n} wires, more than "
                                  f"{MAX_DESIGNS:.0e}: fewer points, or method \"halton\"", KIND)
     return space
