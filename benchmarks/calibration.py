@@ -50,26 +50,47 @@ def run(code_root: Path, args: list[str], cache: str | None = None) -> dict:
     env = dict(os.environ, JAX_LOG_COMPILES="1", PYTHONWARNINGS="ignore", TENSION_ZONES_CACHE=cache or "0")
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     t0 = time.perf_counter()
-    r = subprocess.run([sys.executable, "-c", _CHILD, str(code_root), *args], capture_output=True, text=True,
-                       env=env, timeout=7200)
+    r = subprocess.run(
+        [sys.executable, "-c", _CHILD, str(code_root), *args], capture_output=True, text=True, env=env, timeout=7200
+    )
     wall = time.perf_counter() - t0
     m = re.search(r"SECONDS ([\d.]+) RC (\d+)", r.stdout)
     if not m or m.group(2) != "0":
         raise RuntimeError(f"{args[:2]} failed:\n{r.stdout[-2000:]}\n{r.stderr[-3000:]}")
     compiles = len(re.findall(r"Compiling \S+", r.stderr))
-    return {"seconds": float(m.group(1)), "wall_seconds": wall, "compilations": compiles,
-            "summary": r.stdout.strip().splitlines()[-2] if len(r.stdout.strip().splitlines()) > 1 else ""}
+    return {
+        "seconds": float(m.group(1)),
+        "wall_seconds": wall,
+        "compilations": compiles,
+        "summary": r.stdout.strip().splitlines()[-2] if len(r.stdout.strip().splitlines()) > 1 else "",
+    }
 
 
 def cases(out: Path):
     ftdcr = EX / "ftdcr_v4"
     return {
         "FTDCR v4 (3 segments, 1620 + 443 samples)": [
-            "calibrate", str(ftdcr / "train.csv"), "--format", "opencr", "--design", str(ftdcr / "design.json"),
-            "--validate", str(ftdcr / "val.csv"), "--out", str(out / "ftdcr"), "--quiet"],
+            "calibrate",
+            str(ftdcr / "train.csv"),
+            "--format",
+            "opencr",
+            "--design",
+            str(ftdcr / "design.json"),
+            "--validate",
+            str(ftdcr / "val.csv"),
+            "--out",
+            str(out / "ftdcr"),
+            "--quiet",
+        ],
         "unknown_a_3w (1 segment, 500 samples)": [
-            "calibrate", str(EX / "synthetic" / "unknown_a_3w.csv"), "--design",
-            str(EX / "synthetic" / "unknown_a_3w.design.json"), "--out", str(out / "single"), "--quiet"],
+            "calibrate",
+            str(EX / "synthetic" / "unknown_a_3w.csv"),
+            "--design",
+            str(EX / "synthetic" / "unknown_a_3w.design.json"),
+            "--out",
+            str(out / "single"),
+            "--quiet",
+        ],
     }
 
 
@@ -87,8 +108,12 @@ def main(argv=None):
     args = p.parse_args(argv)
     if args.baseline is None and args.only != "new":
         p.error("--baseline DIR is needed unless --only new")
-    res = {"started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "load_at_start": load(), "rows": [],
-           "argv": " ".join(argv if argv is not None else sys.argv[1:])}
+    res = {
+        "started": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "load_at_start": load(),
+        "rows": [],
+        "argv": " ".join(argv if argv is not None else sys.argv[1:]),
+    }
     for side, root in (("this code", ROOT), ("baseline", Path(args.baseline or ".").resolve())):
         if args.only and (args.only == "new") != (side == "this code"):
             continue
@@ -96,11 +121,16 @@ def main(argv=None):
             out = Path(args.keep) if args.keep and side == "this code" else Path(tmp)
             for name, cli in cases(out).items():
                 c = f"{tmp}/cache"
-                runs = ((("none", None, None),) if side == "baseline" else
-                        (("empty", c, "default"), ("filled", c, "default"), ("filled", c, "0")))
+                runs = (
+                    (("none", None, None),)
+                    if side == "baseline"
+                    else (("empty", c, "default"), ("filled", c, "default"), ("filled", c, "0"))
+                )
                 for cache_state, cache, workers in runs:
                     print(f"[{side}, cache {cache_state}, workers {workers}] {name} ...", flush=True)
-                    extra = (["--force"] if cache_state == "filled" else []) + (["--workers", "0"] if workers == "0" else [])
+                    extra = (["--force"] if cache_state == "filled" else []) + (
+                        ["--workers", "0"] if workers == "0" else []
+                    )
                     r = run(root, cli + extra, cache)
                     r.update(side=side, case=name, cache=cache_state, workers=workers, load=load())
                     print(json.dumps(r), flush=True)
@@ -116,15 +146,22 @@ def main(argv=None):
 
 
 def markdown(res) -> str:
-    lines = [f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
-             f"({res['load_at_start']}).", "",
-             ("| case | code | compilation cache | worker processes | seconds (in process) | wall seconds (fresh "
-              "process) | XLA compilations |"),
-             "|---|---|---|---|---:|---:|---:|"]
+    lines = [
+        f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
+        f"({res['load_at_start']}).",
+        "",
+        (
+            "| case | code | compilation cache | worker processes | seconds (in process) | wall seconds (fresh "
+            "process) | XLA compilations |"
+        ),
+        "|---|---|---|---|---:|---:|---:|",
+    ]
     for r in res["rows"]:
         workers = {"default": "default", "0": "none", None: "-"}[r.get("workers")]
-        lines.append(f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {workers} | {r['seconds']:.1f} | "
-                     f"{r['wall_seconds']:.1f} | {r['compilations']} |")
+        lines.append(
+            f"| {r['case']} | {r['side']} | {r.get('cache', 'none')} | {workers} | {r['seconds']:.1f} | "
+            f"{r['wall_seconds']:.1f} | {r['compilations']} |"
+        )
     return "\n".join(lines)
 
 

@@ -53,8 +53,9 @@ print(json.dumps({"n": n, "measure": measure, "trace_lower_s": t1 - t0, "compile
 def run_case(n: int, measure: str, timeout: float) -> dict:
     t0 = time.perf_counter()
     try:
-        r = subprocess.run([sys.executable, "-c", CHILD, str(n), measure], capture_output=True,
-                           check=False, text=True, timeout=timeout)
+        r = subprocess.run(
+            [sys.executable, "-c", CHILD, str(n), measure], capture_output=True, check=False, text=True, timeout=timeout
+        )
     except subprocess.TimeoutExpired:
         return {"n": n, "measure": measure, "error": f"stopped after {timeout:g} s"}
     if r.returncode != 0:
@@ -68,14 +69,12 @@ def run_case(n: int, measure: str, timeout: float) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--wires", type=int, nargs="+", default=[3, 4, 8, 16, 32, 64])
-    p.add_argument("--measure", nargs="+", choices=("kinematics", "compliance"),
-                   default=["kinematics", "compliance"])
+    p.add_argument("--measure", nargs="+", choices=("kinematics", "compliance"), default=["kinematics", "compliance"])
     p.add_argument("--timeout", type=float, default=300.0)
     p.add_argument("--json")
     args = p.parse_args(argv)
     rows = []
-    print("| measure | wires | trace + lower (s) | XLA compile (s) | chunk run (s) | poses/s "
-          "| process wall (s) |")
+    print("| measure | wires | trace + lower (s) | XLA compile (s) | chunk run (s) | poses/s | process wall (s) |")
     print("|---|---|---|---|---|---|---|")
     for m in args.measure:
         for n in args.wires:
@@ -84,9 +83,11 @@ def main(argv=None) -> int:
             if "error" in r:
                 print(f"| {m} | {n} | {r['error']} | | | | |", flush=True)
             else:
-                print(f"| {m} | {n} | {r['trace_lower_s']:.2f} | {r['compile_s']:.2f} | "
-                      f"{r['run_s']:.4f} | {r['poses_per_s']:.3g} | {r['wall_s']:.1f} |",
-                      flush=True)
+                print(
+                    f"| {m} | {n} | {r['trace_lower_s']:.2f} | {r['compile_s']:.2f} | "
+                    f"{r['run_s']:.4f} | {r['poses_per_s']:.3g} | {r['wall_s']:.1f} |",
+                    flush=True,
+                )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(rows, fh, indent=2)

@@ -44,8 +44,9 @@ ITERATIONS = 80
 def main():
     robot, report, train, val = _ftdcr.load()
     m = report["model"]
-    pb = Problem(RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]),
-                 clock=data_clock(train))
+    pb = Problem(
+        RobotModel.of(robot), robot, train.concat(val), tuple(BY_NAME[n] for n in m["blocks"]), clock=data_clock(train)
+    )
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
     w_train, w_both = (~vmask).astype(float), np.ones(vmask.size)
     fit_rows, held_rows = (np.r_[mask, np.zeros(val.n_samples, bool)] for mask in train.split())
@@ -58,7 +59,9 @@ def main():
     for add in [None] + [[e] for e in extra] + [extra]:
         active = final + (add or [])
         t0 = time.perf_counter()
-        held = rmse(pb.residuals(pb.fit(theta0, active, fit_rows.astype(float), max_iter=ITERATIONS), active)[held_rows])
+        held = rmse(
+            pb.residuals(pb.fit(theta0, active, fit_rows.astype(float), max_iter=ITERATIONS), active)[held_rows]
+        )
         held_final = held if add is None else rows[0]["held_out_mm"]
         th = pb.fit(theta0, active, w_train, max_iter=ITERATIONS)
         r = pb.residuals(th, active)
@@ -66,21 +69,32 @@ def main():
         r_both = pb.residuals(th_both, active)
         name = "final" if not add else f"final + {add[0]}" if len(add) == 1 else "final + all of them"
         rv, rv_both = r[vmask], r_both[vmask]
-        row = {"model": name, "held_out_mm": held,
-               "held_out_share": (held_final**2 - held**2) / (held_final**2 - floor**2),
-               "train_mm": rmse(r[~vmask]), "validate_mm": rmse(rv),
-               "validate_in_fit_mm": rmse(rv_both), "train_in_joint_fit_mm": rmse(r_both[~vmask]),
-               "by_family_mm": {f: [rmse(rv[fam == f]), rmse(rv_both[fam == f])] for f in dict.fromkeys(fam)},
-               "seconds": time.perf_counter() - t0}
+        row = {
+            "model": name,
+            "held_out_mm": held,
+            "held_out_share": (held_final**2 - held**2) / (held_final**2 - floor**2),
+            "train_mm": rmse(r[~vmask]),
+            "validate_mm": rmse(rv),
+            "validate_in_fit_mm": rmse(rv_both),
+            "train_in_joint_fit_mm": rmse(r_both[~vmask]),
+            "by_family_mm": {f: [rmse(rv[fam == f]), rmse(rv_both[fam == f])] for f in dict.fromkeys(fam)},
+            "seconds": time.perf_counter() - t0,
+        }
         rows.append(row)
         print(json.dumps(row), flush=True)
-    print("\n| model | held out (share of the excess) | train (fitted on train) | val (predicted) | "
-          "val (fitted on train + val) | train (fitted on train + val) |\n|---|---:|---:|---:|---:|---:|")
+    print(
+        "\n| model | held out (share of the excess) | train (fitted on train) | val (predicted) | "
+        "val (fitted on train + val) | train (fitted on train + val) |\n|---|---:|---:|---:|---:|---:|"
+    )
     for r in rows:
-        print(f"| {r['model']} | {r['held_out_mm']:.2f} ({100 * r['held_out_share']:+.1f} %) | {r['train_mm']:.2f} | "
-              f"{r['validate_mm']:.2f} | {r['validate_in_fit_mm']:.2f} | {r['train_in_joint_fit_mm']:.2f} |")
-    print("\nThe final model by family of val.csv (predicted / fitted on train + val): "
-          + ", ".join(f"{f} {a:.2f} / {b:.2f} mm" for f, (a, b) in rows[0]["by_family_mm"].items()))
+        print(
+            f"| {r['model']} | {r['held_out_mm']:.2f} ({100 * r['held_out_share']:+.1f} %) | {r['train_mm']:.2f} | "
+            f"{r['validate_mm']:.2f} | {r['validate_in_fit_mm']:.2f} | {r['train_in_joint_fit_mm']:.2f} |"
+        )
+    print(
+        "\nThe final model by family of val.csv (predicted / fitted on train + val): "
+        + ", ".join(f"{f} {a:.2f} / {b:.2f} mm" for f, (a, b) in rows[0]["by_family_mm"].items())
+    )
 
 
 if __name__ == "__main__":

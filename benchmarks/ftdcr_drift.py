@@ -102,14 +102,21 @@ def main():
     bins = TimeBins(span=clock[1])  # (the last sample's bin index is clipped to the last bin)
     index = tuple(KINDS.index(kind(g)) for g in train.groups) + (-1,) * val.n_samples
     blocks = tuple(BY_NAME[n] for n in m["blocks"] if n != "drift") + (
-        BY_NAME["drift"], bins, KindSlack(index=index),
-        KindSlackBySegment(index=index))
+        BY_NAME["drift"],
+        bins,
+        KindSlack(index=index),
+        KindSlackBySegment(index=index),
+    )
     pb = Problem(RobotModel.of(robot), robot, train.concat(val), blocks, clock=clock)
     vmask = np.arange(train.n_samples + val.n_samples) >= train.n_samples
     sl = pb.spec.slices()
     theta0 = pb.null.copy()
-    for name, block in zip(m["blocks"], np.split(np.asarray(m["theta"], float),
-                                                 np.cumsum([BY_NAME[n].size(pb.model, pb._phys_np) for n in m["blocks"]])[:-1])):
+    for name, block in zip(
+        m["blocks"],
+        np.split(
+            np.asarray(m["theta"], float), np.cumsum([BY_NAME[n].size(pb.model, pb._phys_np) for n in m["blocks"]])[:-1]
+        ),
+    ):
         theta0[sl[name]] = block
     final = [a for a in m["active"] if a != "drift"]
     print(f"final model: {' + '.join(final)}; train.csv spans {clock[1] * 60:.1f} min", flush=True)
@@ -123,22 +130,26 @@ def main():
         if "kind_slack" in extra:
             line = line.replace(", val", ", val (no slack)")
             line += "; common slack by kind (mm): " + ", ".join(
-                f"{k} {v:+.3f}" for k, v in zip(KINDS, np.r_[0.0, th[sl["kind_slack"]]]))
+                f"{k} {v:+.3f}" for k, v in zip(KINDS, np.r_[0.0, th[sl["kind_slack"]]])
+            )
         if extra == ["kind_slack_seg"]:
             line = line.replace(", val", ", val (no slack)")
             table = th[sl["kind_slack_seg"]].reshape(len(KINDS) - 1, -1)
             line += "; slack of each segment's wires by kind (mm): " + ", ".join(
-                f"{k} " + " ".join(f"{v:+.3f}" for v in row) for k, row in zip(KINDS[1:], table))
+                f"{k} " + " ".join(f"{v:+.3f}" for v in row) for k, row in zip(KINDS[1:], table)
+            )
             line += "; preload (N): " + " ".join(f"{v:.1f}" for v in th[sl["preload"]])
         if extra == ["time_bins"]:
             width = clock[1] * 60 / BINS
             line += f"; common slack per {width:.1f}-min bin (mm): " + ", ".join(
-                f"{v:+.3f}" for v in np.r_[0.0, th[sl["time_bins"]]])
+                f"{v:+.3f}" for v in np.r_[0.0, th[sl["time_bins"]]]
+            )
             hours = np.clip((train.timestamp - clock[0]) / 3600, 0, clock[1])
             k = np.minimum((hours / clock[1] * BINS).astype(int), BINS - 1)
             groups = np.array(train.groups)
             line += "\n  patterns per bin: " + "; ".join(
-                f"{b}: " + ", ".join(sorted({kind(g) for g in groups[k == b]}, key=KINDS.index)) for b in range(BINS))
+                f"{b}: " + ", ".join(sorted({kind(g) for g in groups[k == b]}, key=KINDS.index)) for b in range(BINS)
+            )
         print(line + f" ({time.perf_counter() - t0:.0f} s)", flush=True)
 
 

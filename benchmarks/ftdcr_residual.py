@@ -46,19 +46,26 @@ def main():
     r = both.p - np.concatenate([pred["train"], pred["val"]])
     h = home_memory(both, HOME_MM, BACK)
     res_along = np.sum(r[h["index"]] * h["direction"], axis=1)
-    print(f"\nhome command (every wire within {HOME_MM} mm of zero): {h['n']} samples over {h['span']:.0f} min; "
-          f"spread of the measured tip {h['spread_mm']:.2f} mm (RMS about the median); memory along the previous "
-          f"excursion {h['along_mm']:.2f} +- {h['along_std_mm']:.2f} mm, the rest {h['across_mm']:.2f} mm RMS; "
-          f"the model's residual there along it {res_along.mean():+.2f} mm, RMS {rmse(r[h['index']]):.2f} mm")
+    print(
+        f"\nhome command (every wire within {HOME_MM} mm of zero): {h['n']} samples over {h['span']:.0f} min; "
+        f"spread of the measured tip {h['spread_mm']:.2f} mm (RMS about the median); memory along the previous "
+        f"excursion {h['along_mm']:.2f} +- {h['along_std_mm']:.2f} mm, the rest {h['across_mm']:.2f} mm RMS; "
+        f"the model's residual there along it {res_along.mean():+.2f} mm, RMS {rmse(r[h['index']]):.2f} mm"
+    )
     v, sv = h["drift_mm"], h["drift_std_mm"]
-    print("drift (fitted with the memory): " + ", ".join(f"{c} {a:+.3f} +- {b:.3f}" for c, a, b in zip("xyz", v, sv))
-          + f" mm per minute, i.e. {np.abs(v).max() * h['span']:.2f} mm at most over the {h['span']:.0f} min")
+    print(
+        "drift (fitted with the memory): "
+        + ", ".join(f"{c} {a:+.3f} +- {b:.3f}" for c, a, b in zip("xyz", v, sv))
+        + f" mm per minute, i.e. {np.abs(v).max() * h['span']:.2f} mm at most over the {h['span']:.0f} min"
+    )
     vel = np.concatenate([np.gradient(pred["train"], axis=0), np.gradient(pred["val"], axis=0)])
     speed = np.linalg.norm(vel, axis=1)
     m = speed > 1.0
     a = np.sum(r[m] * vel[m] / speed[m, None], axis=1)
-    print(f"latency: residual along the motion {a.mean():+.2f} mm (mean over {m.sum()} moving samples, "
-          f"median step {np.median(speed[m]):.1f} mm per sample)")
+    print(
+        f"latency: residual along the motion {a.mean():+.2f} mm (mean over {m.sum()} moving samples, "
+        f"median step {np.median(speed[m]):.1f} mm per sample)"
+    )
     # every wire paid out (the single-tendon pulls' ends): nothing holds the robot but its elasticity
     p_hat = np.concatenate([pred["train"], pred["val"]])
     home_p, home_hat = np.median(both.p[h["index"]], axis=0), np.median(p_hat[h["index"]], axis=0)
@@ -67,18 +74,26 @@ def main():
     if len(slack):
         off = both.p[slack] - home_p
         cos = np.sum(off * previous_excursion(both.p, slack, home_p, BACK), axis=1) / np.linalg.norm(off, axis=1)
-        print(f"every wire paid out: {len(slack)} samples; the measured tip {rmse(off):.2f} mm (RMS) from home, "
-              f"toward the largest excursion of the {BACK} samples before (cosine median {np.median(cos):.2f}, "
-              f"least {np.min(cos):.2f}); the model's {rmse(p_hat[slack] - home_hat):.2f} mm, its residual "
-              f"there {rmse(r[slack]):.2f} mm RMS")
+        print(
+            f"every wire paid out: {len(slack)} samples; the measured tip {rmse(off):.2f} mm (RMS) from home, "
+            f"toward the largest excursion of the {BACK} samples before (cosine median {np.median(cos):.2f}, "
+            f"least {np.min(cos):.2f}); the model's {rmse(p_hat[slack] - home_hat):.2f} mm, its residual "
+            f"there {rmse(r[slack]):.2f} mm RMS"
+        )
     # how far the tip moves from home, measured against predicted (each from its own home tip), by family
     fam = np.concatenate([[pattern_family(g) for g in d.groups] for d in data.values()])
     dm = np.linalg.norm(both.p - home_p, axis=1)
     dp = np.linalg.norm(p_hat - home_hat, axis=1)
     big = dp > DEFLECTION_MM
-    print("deflection from home, measured / predicted (median over predicted deflections above "
-          f"{DEFLECTION_MM:.0f} mm): " + ", ".join(f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"
-                      for f in dict.fromkeys(fam) if (k := big & (fam == f)).any()))
+    print(
+        "deflection from home, measured / predicted (median over predicted deflections above "
+        f"{DEFLECTION_MM:.0f} mm): "
+        + ", ".join(
+            f"{f} {np.median(dm[k] / dp[k]):.3f} ({k.sum()})"
+            for f in dict.fromkeys(fam)
+            if (k := big & (fam == f)).any()
+        )
+    )
 
 
 if __name__ == "__main__":

@@ -48,8 +48,11 @@ def main(argv=None):
     def errors(theta, theta_all, active):
         """Held out by the training groups' fit ``theta``, validation by the refit on every sample."""
         r, r_all = pb.residuals(theta, active), pb.residuals(theta_all, active)
-        return {"held_out_mm": rmse(r[held]), "validate_mm": rmse(r_all[vmask]),
-                "validate_aligned_mm": rmse_aligned(r_all[vmask])}
+        return {
+            "held_out_mm": rmse(r[held]),
+            "validate_mm": rmse(r_all[vmask]),
+            "validate_aligned_mm": rmse_aligned(r_all[vmask]),
+        }
 
     rows = []
     theta = _initial(pb, train, pb.null.copy(), names)
@@ -64,22 +67,39 @@ def main(argv=None):
             th_rod = pb.fit(theta, rod_active, w)
             th_rod_all = pb.fit(th_rod, rod_active, w_all)
             rod = errors(th_rod, th_rod_all, rod_active)
-            freedom = [round(float(v), 3)
-                       for v in pb.describe(th_rod_all, ["variable_curvature"])["variable_curvature"].values()]
+            freedom = [
+                round(float(v), 3)
+                for v in pb.describe(th_rod_all, ["variable_curvature"])["variable_curvature"].values()
+            ]
         else:
             rod, freedom = dict(cc), None  # no load: the rod is the constant-curvature segment
-        rows.append({"effects": step["effects"], "constant_curvature": cc, "rod": rod, "curvature_freedom": freedom,
-                     "seconds_cc": t1 - t0, "seconds_rod": time.perf_counter() - t1})
-        print(f"{' + '.join(step['effects']) or 'nominal'}: cc {cc['held_out_mm']:.3f} / {cc['validate_mm']:.3f}, "
-              f"rod {rod['held_out_mm']:.3f} / {rod['validate_mm']:.3f} mm, freedom {freedom}", flush=True)
+        rows.append(
+            {
+                "effects": step["effects"],
+                "constant_curvature": cc,
+                "rod": rod,
+                "curvature_freedom": freedom,
+                "seconds_cc": t1 - t0,
+                "seconds_rod": time.perf_counter() - t1,
+            }
+        )
+        print(
+            f"{' + '.join(step['effects']) or 'nominal'}: cc {cc['held_out_mm']:.3f} / {cc['validate_mm']:.3f}, "
+            f"rod {rod['held_out_mm']:.3f} / {rod['validate_mm']:.3f} mm, freedom {freedom}",
+            flush=True,
+        )
     Path(a.out).write_text(json.dumps({"pieces": 4, "rows": rows}, indent=1))
-    print("\n| model | held out, CC | held out, rod | val, CC | val, rod | val aligned, CC | val aligned, rod | curvature freedom |")
+    print(
+        "\n| model | held out, CC | held out, rod | val, CC | val, rod | val aligned, CC | val aligned, rod | curvature freedom |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|---|")
     for r in rows:
         c, d = r["constant_curvature"], r["rod"]
-        print(f"| {' + '.join(['nominal'] + r['effects'])} | {c['held_out_mm']:.2f} | {d['held_out_mm']:.2f} | "
-              f"{c['validate_mm']:.2f} | {d['validate_mm']:.2f} | {c['validate_aligned_mm']:.2f} | "
-              f"{d['validate_aligned_mm']:.2f} | {r['curvature_freedom'] or 'no load: the rod is CC'} |")
+        print(
+            f"| {' + '.join(['nominal'] + r['effects'])} | {c['held_out_mm']:.2f} | {d['held_out_mm']:.2f} | "
+            f"{c['validate_mm']:.2f} | {d['validate_mm']:.2f} | {c['validate_aligned_mm']:.2f} | "
+            f"{d['validate_aligned_mm']:.2f} | {r['curvature_freedom'] or 'no load: the rod is CC'} |"
+        )
 
 
 if __name__ == "__main__":

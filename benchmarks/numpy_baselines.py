@@ -25,9 +25,9 @@ def jacobians(L, r, alpha, theta_L, delta):
     s, c = np.sin(theta_L), np.cos(theta_L)
     A = T * c - s + 1
     sd, cd = np.sin(delta), np.cos(delta)
-    Jv = L * np.array([[cd * A / T**2, -sd * (s - 1) / T],
-                       [-sd * A / T**2, -cd * (s - 1) / T],
-                       [(T * s + c) / T**2, 0.0]])
+    Jv = L * np.array(
+        [[cd * A / T**2, -sd * (s - 1) / T], [-sd * A / T**2, -cd * (s - 1) / T], [(T * s + c) / T**2, 0.0]]
+    )
     Jw = np.array([[-sd, cd * c], [-cd, -sd * c], [0.0, -1 + s]])
     dk = delta + alpha
     Jq = r * np.stack([np.cos(dk), -T * np.sin(dk)], axis=1)
@@ -44,8 +44,10 @@ def measures_loop(L, r, alpha, thetas, deltas, dq):
     """Per-pose loop over the grid; returns a dict of (n_theta, n_delta) arrays, reduced Jacobian."""
     n = len(alpha)
     Q = dq * np.array(list(itertools.product((-1.0, 0.0, 1.0), repeat=n))).T  # (n, 3^n)
-    out = {k: np.zeros((len(thetas), len(deltas))) for k in
-           ("kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "dp_max", "dw_max")}
+    out = {
+        k: np.zeros((len(thetas), len(deltas)))
+        for k in ("kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "dp_max", "dw_max")
+    }
     for i, th in enumerate(thetas):
         for j, de in enumerate(deltas):
             Jx, Jq = jacobians(L, r, alpha, th, de)
@@ -71,11 +73,15 @@ def measures_vectorised(L, r, alpha, thetas, deltas, dq):
     A = T * c - s + 1
     sd, cd = np.sin(de), np.cos(de)
     z = np.zeros_like(T)
-    Jv = L * np.stack([np.stack([cd * A / T**2, -sd * (s - 1) / T], -1),
-                       np.stack([-sd * A / T**2, -cd * (s - 1) / T], -1),
-                       np.stack([(T * s + c) / T**2, z], -1)], 1)
-    Jw = np.stack([np.stack([-sd, cd * c], -1), np.stack([-cd, -sd * c], -1),
-                   np.stack([z, -1 + s], -1)], 1)
+    Jv = L * np.stack(
+        [
+            np.stack([cd * A / T**2, -sd * (s - 1) / T], -1),
+            np.stack([-sd * A / T**2, -cd * (s - 1) / T], -1),
+            np.stack([(T * s + c) / T**2, z], -1),
+        ],
+        1,
+    )
+    Jw = np.stack([np.stack([-sd, cd * c], -1), np.stack([-cd, -sd * c], -1), np.stack([z, -1 + s], -1)], 1)
     dk = de[:, None] + alpha[None, :]
     taut = np.cos(dk) > TOL
     Jq = r * np.stack([np.cos(dk), -T[:, None] * np.sin(dk)], -1) * taut[..., None]
@@ -100,14 +106,19 @@ def _slsqp_tensions(Jq, rhs, f_min):
     from scipy.optimize import minimize
 
     n = Jq.shape[0]
-    res = minimize(lambda t: t @ t, np.full(n, f_min + 1.0), jac=lambda t: 2 * t,
-                   constraints=[{"type": "eq", "fun": lambda t: Jq.T @ t - rhs, "jac": lambda t: Jq.T}],
-                   bounds=[(f_min, None)] * n, method="SLSQP", options={"ftol": 1e-12, "maxiter": 200})
+    res = minimize(
+        lambda t: t @ t,
+        np.full(n, f_min + 1.0),
+        jac=lambda t: 2 * t,
+        constraints=[{"type": "eq", "fun": lambda t: Jq.T @ t - rhs, "jac": lambda t: Jq.T}],
+        bounds=[(f_min, None)] * n,
+        method="SLSQP",
+        options={"ftol": 1e-12, "maxiter": 200},
+    )
     return res.x
 
 
-def compliance_scipy_loop(L, r, alpha, EI, k_w, thetas, deltas, wrench, f_min=0.0, h=1e-6,
-                          stiffness=True):
+def compliance_scipy_loop(L, r, alpha, EI, k_w, thetas, deltas, wrench, f_min=0.0, h=1e-6, stiffness=True):
     """Per pose (tension_zones/MODEL.md Sec. 4; paper Eqs. 23-31 in psi): the tensions by SLSQP, then
     ``K_psi = hess U + d(J_qpsi^T tau)/dpsi - d(J_xpsi^T w)/dpsi + k_w J~^T J~`` (the two derivative
     terms by central differences of the analytic Jacobians) and the deflection ``dx = J_xpsi

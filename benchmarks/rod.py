@@ -61,8 +61,11 @@ def speed(robot, m, weight):
     jax.block_until_ready(f(phys))
     compile_s = time.perf_counter() - t0
     J = jax.jit(jax.jacfwd(lambda ei: tips({**phys, "EI": ei})))
-    return {"compile_s": compile_s, "us_per_sample": best(f, phys) / N * 1e6,
-            "jac_us_per_sample": best(J, phys["EI"]) / N * 1e6}
+    return {
+        "compile_s": compile_s,
+        "us_per_sample": best(f, phys) / N * 1e6,
+        "jac_us_per_sample": best(J, phys["EI"]) / N * 1e6,
+    }
 
 
 def accuracy():
@@ -71,9 +74,14 @@ def accuracy():
     seg = tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)
     robot, q = tz.Robot(seg), jnp.array([-3.0, 0.5, 0.5])
     rows = {}
-    for name, load, gj in (("weight 0.003 N/mm", Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0])), None),
-                           ("lateral tip force 0.4 N (rigid torsion)",
-                            Load(jnp.array([0.0, 0.4, -0.2]), jnp.array([0.002, 0.0, -0.002])), 1e9)):
+    for name, load, gj in (
+        ("weight 0.003 N/mm", Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0])), None),
+        (
+            "lateral tip force 0.4 N (rigid torsion)",
+            Load(jnp.array([0.0, 0.4, -0.2]), jnp.array([0.002, 0.0, -0.002])),
+            1e9,
+        ),
+    ):
         errs = []
         for m in PIECES + (16,):
             phys = robot.params()
@@ -83,8 +91,16 @@ def accuracy():
             p = np.asarray(chain_tip(E.piece_lengths(phys, st), B)[0])
             sm = E._Sample(phys, st, q, load.tip_force, jnp.zeros(3), jnp.asarray(True))
             tau = np.asarray(sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0))
-            ref = rr.solve_segment(60.0, 2454.0, np.asarray(seg.wire_angles), 4.5, tau,
-                                   weight=np.asarray(load.gravity), tip_force=np.asarray(load.tip_force), GJ=gj)
+            ref = rr.solve_segment(
+                60.0,
+                2454.0,
+                np.asarray(seg.wire_angles),
+                4.5,
+                tau,
+                weight=np.asarray(load.gravity),
+                tip_force=np.asarray(load.tip_force),
+                GJ=gj,
+            )
             errs.append(float(np.linalg.norm(p - ref.tip_position)))
         rows[name] = errs
     return rows
@@ -96,24 +112,35 @@ def main(argv=None):
     args = p.parse_args(argv)
     started = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())
     load0 = os.popen("uptime").read().strip()
-    robots = {"1 segment (60 mm, 3 wires)": tz.Robot(tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)),
-              "FTDCR v4 (3 segments, 9 wires)": tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))}
-    lines = [f"`python benchmarks/rod.py`, started {started} ({load0}); {N} samples per call, float64, "
-             "best of three after compilation.", "",
-             "| robot | pieces per segment | load | compile (s) | tip, us/sample | Jacobian in 3 parameters, us/sample |",
-             "|---|---:|---|---:|---:|---:|"]
+    robots = {
+        "1 segment (60 mm, 3 wires)": tz.Robot(tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)),
+        "FTDCR v4 (3 segments, 9 wires)": tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json")),
+    }
+    lines = [
+        f"`python benchmarks/rod.py`, started {started} ({load0}); {N} samples per call, float64, "
+        "best of three after compilation.",
+        "",
+        "| robot | pieces per segment | load | compile (s) | tip, us/sample | Jacobian in 3 parameters, us/sample |",
+        "|---|---:|---|---:|---:|---:|",
+    ]
     for name, robot in robots.items():
         for m in PIECES:
             for w in (0.0, 0.003):
                 r = speed(robot, m, w)
-                lines.append(f"| {name} | {m} | {'weight' if w else 'none'} | {r['compile_s']:.1f} | "
-                             f"{r['us_per_sample']:.1f} | {r['jac_us_per_sample']:.1f} |")
+                lines.append(
+                    f"| {name} | {m} | {'weight' if w else 'none'} | {r['compile_s']:.1f} | "
+                    f"{r['us_per_sample']:.1f} | {r['jac_us_per_sample']:.1f} |"
+                )
                 print(lines[-1], flush=True)
     acc = accuracy()
-    lines += ["", "Tip error (mm) against the Kirchhoff rod (`tests/reference_rod.py`, same tendon tensions), "
-              "60 mm segment, EI 2454 N mm^2:", "",
-              "| load | " + " | ".join(f"{m} pieces" for m in PIECES + (16,)) + " |",
-              "|---|" + "---:|" * (len(PIECES) + 1)]
+    lines += [
+        "",
+        "Tip error (mm) against the Kirchhoff rod (`tests/reference_rod.py`, same tendon tensions), "
+        "60 mm segment, EI 2454 N mm^2:",
+        "",
+        "| load | " + " | ".join(f"{m} pieces" for m in PIECES + (16,)) + " |",
+        "|---|" + "---:|" * (len(PIECES) + 1),
+    ]
     for name, errs in acc.items():
         lines.append(f"| {name} | " + " | ".join(f"{e:.4f}" for e in errs) + " |")
     md = "\n".join(lines)

@@ -64,7 +64,8 @@ def bench_kinematics(quick):
         n_loop = th_small[:: (6 if n == 8 else 1)].size * de_small.size
         # the per-pose loop is slow (3^n columns): timed on (a slice of) the paper grid
         loop = lambda: nb.measures_loop(  # noqa: E731
-            20.0, 2.0, alpha, th_small[:: (6 if n == 8 else 1)], de_small, 0.4)
+            20.0, 2.0, alpha, th_small[:: (6 if n == 8 else 1)], de_small, 0.4
+        )
         vec = lambda: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4)  # noqa: E731
 
         def jax_run(design=d):
@@ -81,16 +82,20 @@ def bench_kinematics(quick):
         t_jax = statistics.median(t_j)
         # new values of the same shapes: no recompile (second design, timed like the median)
         t_new_values = _seconds(lambda: jax_run(d.replace(pitch_radius=2.5, length=25.0)))
-        rows.append({
-            "n_wires": n, "poses": n_big,
-            "loop_poses_per_s": n_loop / statistics.median(t_l),
-            "numpy_poses_per_s": n_big / statistics.median(t_n),
-            "jax_poses_per_s": n_big / t_jax,
-            "jax_compile_s": max(first - t_jax, 0.0),
-            "jax_new_values_s": t_new_values, "jax_median_s": t_jax,
-            "speedup_vs_loop": statistics.median(n_big * a / (n_loop * b) for a, b in zip(t_l, t_j)),
-            "speedup_vs_numpy": statistics.median(a / b for a, b in zip(t_n, t_j)),
-        })
+        rows.append(
+            {
+                "n_wires": n,
+                "poses": n_big,
+                "loop_poses_per_s": n_loop / statistics.median(t_l),
+                "numpy_poses_per_s": n_big / statistics.median(t_n),
+                "jax_poses_per_s": n_big / t_jax,
+                "jax_compile_s": max(first - t_jax, 0.0),
+                "jax_new_values_s": t_new_values,
+                "jax_median_s": t_jax,
+                "speedup_vs_loop": statistics.median(n_big * a / (n_loop * b) for a, b in zip(t_l, t_j)),
+                "speedup_vs_numpy": statistics.median(a / b for a, b in zip(t_n, t_j)),
+            }
+        )
     return rows
 
 
@@ -107,11 +112,12 @@ def bench_compliance(quick):
         d = tz.Design(n, 20.0, 2.0)
         alpha = np.asarray(d.wire_angles)
         loop = lambda stiffness=True: nb.compliance_scipy_loop(  # noqa: E731
-            20.0, 2.0, alpha, float(d.backbone_EI), float(d.wire_stiffness), th, de, w,
-            stiffness=stiffness)
+            20.0, 2.0, alpha, float(d.backbone_EI), float(d.wire_stiffness), th, de, w, stiffness=stiffness
+        )
         ref, ours = loop(), compliance_grid(d, w, np.degrees(th), np.degrees(de))  # also warm-up
-        agree = max(float(np.nanmax(np.abs(ours[k] - ref[k]) / np.abs(ref[k])))
-                    for k in ref if k.startswith("deflection"))
+        agree = max(
+            float(np.nanmax(np.abs(ours[k] - ref[k]) / np.abs(ref[k]))) for k in ref if k.startswith("deflection")
+        )
         # the batched path on a grid 100x larger, so the timer sees real work
         th_b = np.radians(np.linspace(89.0, 45.0, 100))
         de_b = np.radians(np.arange(0.0, 360.0, 0.15))
@@ -129,14 +135,18 @@ def bench_compliance(quick):
             t_o.append(_seconds(lambda: loop(stiffness=False)))
             t_j.append(_seconds(jax_run))
         n_loop, n_jax = th.size * de.size, th_b.size * de_b.size
-        rows.append({"n_wires": n, "scipy_poses_per_s": n_loop / statistics.median(t_s),
-                     "slsqp_only_poses_per_s": n_loop / statistics.median(t_o),
-                     "jax_poses_per_s": n_jax / statistics.median(t_j),
-                     "jax_compile_s": max(first - statistics.median(t_j), 0.0),
-                     "speedup": statistics.median(n_jax * a / (n_loop * b) for a, b in zip(t_s, t_j)),
-                     "speedup_vs_slsqp_only": statistics.median(
-                         n_jax * a / (n_loop * b) for a, b in zip(t_o, t_j)),
-                     "max_rel_difference": agree})
+        rows.append(
+            {
+                "n_wires": n,
+                "scipy_poses_per_s": n_loop / statistics.median(t_s),
+                "slsqp_only_poses_per_s": n_loop / statistics.median(t_o),
+                "jax_poses_per_s": n_jax / statistics.median(t_j),
+                "jax_compile_s": max(first - statistics.median(t_j), 0.0),
+                "speedup": statistics.median(n_jax * a / (n_loop * b) for a, b in zip(t_s, t_j)),
+                "speedup_vs_slsqp_only": statistics.median(n_jax * a / (n_loop * b) for a, b in zip(t_o, t_j)),
+                "max_rel_difference": agree,
+            }
+        )
     return rows
 
 
@@ -169,8 +179,9 @@ _SCALING_CHILD = textwrap.dedent("""
 def _child(args, env_extra=None):
     env = dict(os.environ)
     env.update(env_extra or {})
-    r = subprocess.run([sys.executable, "-c", _SCALING_CHILD, *map(str, args)], env=env,
-                       capture_output=True, text=True, timeout=3600)
+    r = subprocess.run(
+        [sys.executable, "-c", _SCALING_CHILD, *map(str, args)], env=env, capture_output=True, text=True, timeout=3600
+    )
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
     return json.loads(r.stdout.strip().splitlines()[-1])
@@ -214,56 +225,86 @@ def plot_scaling(scaling, path):
 def machine():
     import jax
 
-    return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "cpu": platform.processor() or platform.machine(), "cores": os.cpu_count(),
-            "python": platform.python_version(), "jax": jax.__version__,
-            "numpy": np.__version__, "load_average_1min": os.getloadavg()[0]}
+    return {
+        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+        "cpu": platform.processor() or platform.machine(),
+        "cores": os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "numpy": np.__version__,
+        "load_average_1min": os.getloadavg()[0],
+    }
 
 
 def markdown(res) -> str:
     m = res["machine"]
-    out = [f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
-           f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`; load average at the "
-           f"start {m['load_average_1min']:.1f} (other work on the machine slows every column alike).",
-           ""]
+    out = [
+        f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
+        f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`; load average at the "
+        f"start {m['load_average_1min']:.1f} (other work on the machine slows every column alike).",
+        "",
+    ]
     if "kinematics" in res:  # --only may leave a section out
-        out += ["### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)", "",
-                "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
-                "x loop | x NumPy | compile (s) | target |",
-                "|---|---|---|---|---|---|---|---|"]
+        out += [
+            "### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)",
+            "",
+            "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
+            "x loop | x NumPy | compile (s) | target |",
+            "|---|---|---|---|---|---|---|---|",
+        ]
     for r in res.get("kinematics", []):
         tgt = 3e6 if r["n_wires"] in (3, 4) else 1e6
-        checks = [(f">= {tgt:.0e}/s", r["jax_poses_per_s"] >= tgt),
-                  ("300x loop", r["speedup_vs_loop"] >= 300), ("3x NumPy", r["speedup_vs_numpy"] >= 3),
-                  ("compile < 5 s", r["jax_compile_s"] < 5)]
+        checks = [
+            (f">= {tgt:.0e}/s", r["jax_poses_per_s"] >= tgt),
+            ("300x loop", r["speedup_vs_loop"] >= 300),
+            ("3x NumPy", r["speedup_vs_numpy"] >= 3),
+            ("compile < 5 s", r["jax_compile_s"] < 5),
+        ]
         status = ", ".join(f"{name}: {'met' if ok else 'MISSED'}" for name, ok in checks)
-        out.append(f"| {r['n_wires']} | {r['loop_poses_per_s']:.3g} | {r['numpy_poses_per_s']:.3g}"
-                   f" | {r['jax_poses_per_s']:.3g} | {r['speedup_vs_loop']:.0f} | "
-                   f"{r['speedup_vs_numpy']:.1f} | {r['jax_compile_s']:.2f} | {status} |")
+        out.append(
+            f"| {r['n_wires']} | {r['loop_poses_per_s']:.3g} | {r['numpy_poses_per_s']:.3g}"
+            f" | {r['jax_poses_per_s']:.3g} | {r['speedup_vs_loop']:.0f} | "
+            f"{r['speedup_vs_numpy']:.1f} | {r['jax_compile_s']:.2f} | {status} |"
+        )
     if "compliance" in res:
-        out += ["", "### Compliance sweep (tension solve + stiffness + deflection)", "",
-                "| wires | per pose: SLSQP + NumPy (poses/s) | JAX batched (poses/s) | speed-up | "
-                "SLSQP alone (poses/s) | x SLSQP alone | "
-                "compile (s) | max rel. difference | target |", "|---|---|---|---|---|---|---|---|---|"]
+        out += [
+            "",
+            "### Compliance sweep (tension solve + stiffness + deflection)",
+            "",
+            "| wires | per pose: SLSQP + NumPy (poses/s) | JAX batched (poses/s) | speed-up | "
+            "SLSQP alone (poses/s) | x SLSQP alone | "
+            "compile (s) | max rel. difference | target |",
+            "|---|---|---|---|---|---|---|---|---|",
+        ]
         for r in res["compliance"]:
-            out.append(f"| {r['n_wires']} | {r['scipy_poses_per_s']:.3g} | "
-                       f"{r['jax_poses_per_s']:.3g} | {r['speedup']:.0f} | "
-                       f"{r['slsqp_only_poses_per_s']:.3g} | {r['speedup_vs_slsqp_only']:.0f} | "
-                       f"{r['jax_compile_s']:.2f} | {r['max_rel_difference']:.1e} | "
-                       f"{'met' if r['speedup'] >= 1000 else 'MISSED'} (>= 1000x) |")
+            out.append(
+                f"| {r['n_wires']} | {r['scipy_poses_per_s']:.3g} | "
+                f"{r['jax_poses_per_s']:.3g} | {r['speedup']:.0f} | "
+                f"{r['slsqp_only_poses_per_s']:.3g} | {r['speedup_vs_slsqp_only']:.0f} | "
+                f"{r['jax_compile_s']:.2f} | {r['max_rel_difference']:.1e} | "
+                f"{'met' if r['speedup'] >= 1000 else 'MISSED'} (>= 1000x) |"
+            )
     if "scaling" in res:
-        out += ["", "### Scaling (4 wires, all 17 arrays kept, chunked sweep; `scaling.png`)", "",
-                "Peak memory is the whole process's high-water mark (`VmHWM`), JAX included.", "",
-                "| poses | time (s) | poses/s | peak memory (MB) |", "|---|---|---|---|"]
+        out += [
+            "",
+            "### Scaling (4 wires, all 17 arrays kept, chunked sweep; `scaling.png`)",
+            "",
+            "Peak memory is the whole process's high-water mark (`VmHWM`), JAX included.",
+            "",
+            "| poses | time (s) | poses/s | peak memory (MB) |",
+            "|---|---|---|---|",
+        ]
         for r in res["scaling"]["rows"]:
-            out.append(f"| {r['poses']:.2g} | {r['seconds']:.3g} | {r['poses'] / r['seconds']:.3g}"
-                       f" | {r['peak_rss_mb']:.0f} |")
+            out.append(
+                f"| {r['poses']:.2g} | {r['seconds']:.3g} | {r['poses'] / r['seconds']:.3g} | {r['peak_rss_mb']:.0f} |"
+            )
         s = res["scaling"]["sharded_4_host_devices"]
-        out.append(f"| {s['poses']:.2g} on {s['devices']} forced host devices | {s['seconds']:.3g} "
-                   f"| {s['poses'] / s['seconds']:.3g} | {s['peak_rss_mb']:.0f} |")
+        out.append(
+            f"| {s['poses']:.2g} on {s['devices']} forced host devices | {s['seconds']:.3g} "
+            f"| {s['poses'] / s['seconds']:.3g} | {s['peak_rss_mb']:.0f} |"
+        )
     if "explore" in res:
-        out += ["", "### Design-space exploration (4 wires, the paper's 18 x 145 grid)", "",
-                markdown_explore(res)]
+        out += ["", "### Design-space exploration (4 wires, the paper's 18 x 145 grid)", "", markdown_explore(res)]
     for key, title in (("calibration", "Calibration"), ("optimiser", "Optimiser")):
         if key in res:
             out += ["", f"### {title}", "", "| what | seconds | note |", "|---|---|---|"]
@@ -297,16 +338,18 @@ _CALIB_CHILD = textwrap.dedent("""
 def bench_calibration(quick):
     """A 500-sample set from the project's own simulator (undeclared backlash), full library, a fresh
     process: what a lab engineer waits for, compile included."""
-    r = subprocess.run([sys.executable, "-c", _CALIB_CHILD, str(HERE.parent / "tests")],
-                       capture_output=True, text=True, timeout=1800)
+    r = subprocess.run(
+        [sys.executable, "-c", _CALIB_CHILD, str(HERE.parent / "tests")], capture_output=True, text=True, timeout=1800
+    )
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
     res = json.loads(r.stdout.strip().splitlines()[-1])
-    note = (f"found {', '.join(res['effects']) or 'nothing'}; held-out RMSE "
-            f"{res['rmse_after_mm']:.3f} mm (noise floor {res['noise_floor_mm']:.3f}); "
-            f"target < 60 s: {'met' if res['seconds'] < 60 else 'MISSED'}")
-    return [{"what": "calibrate 500 samples, full library (cold process)", "seconds": res["seconds"],
-             "note": note}]
+    note = (
+        f"found {', '.join(res['effects']) or 'nothing'}; held-out RMSE "
+        f"{res['rmse_after_mm']:.3f} mm (noise floor {res['noise_floor_mm']:.3f}); "
+        f"target < 60 s: {'met' if res['seconds'] < 60 else 'MISSED'}"
+    )
+    return [{"what": "calibrate 500 samples, full library (cold process)", "seconds": res["seconds"], "note": note}]
 
 
 def bench_optimiser(quick):
@@ -316,9 +359,15 @@ def bench_optimiser(quick):
 
     rows = []
     for n in (3, 4, 5):
-        sc = parse_scenario({"n_wires": [n], "free_wire_angles": True,
-                             "theta_L_deg": [20.0, 80.0, 20.0], "delta_deg": [0.0, 350.0, 10.0],
-                             "optimizer": {"starts": 4, "steps": 50 if quick else 200}})
+        sc = parse_scenario(
+            {
+                "n_wires": [n],
+                "free_wire_angles": True,
+                "theta_L_deg": [20.0, 80.0, 20.0],
+                "delta_deg": [0.0, 350.0, 10.0],
+                "optimizer": {"starts": 4, "steps": 50 if quick else 200},
+            }
+        )
         t0 = time.perf_counter()
         res = optimize(sc, progress=False)
         t_first = time.perf_counter() - t0
@@ -326,11 +375,15 @@ def bench_optimiser(quick):
         optimize(sc, progress=False)
         t_again = time.perf_counter() - t0
         row = res["per_wire_count"][0]
-        rows.append({"what": f"optimise {n} wires ({sc.starts} starts x {sc.steps} steps, "
-                             f"{sc.theta_L.size * sc.delta.size} task poses)",
-                     "seconds": t_again,
-                     "note": f"first call {t_first:.1f} s (compile); objective {row['objective']:.3f}, "
-                             f"feasible {row['feasible']}"})
+        rows.append(
+            {
+                "what": f"optimise {n} wires ({sc.starts} starts x {sc.steps} steps, "
+                f"{sc.theta_L.size * sc.delta.size} task poses)",
+                "seconds": t_again,
+                "note": f"first call {t_first:.1f} s (compile); objective {row['objective']:.3f}, "
+                f"feasible {row['feasible']}",
+            }
+        )
     return rows
 
 
@@ -340,10 +393,17 @@ def bench_optimiser(quick):
 def _explore_space(n_designs, loaded):
     """4 wires; pitch radius, length, wire stiffness and each wire's angle offset varied; a Halton
     sample of ``n_designs``; the paper's grid (theta_L 0..85 step 5, delta 0..360 step 2.5)."""
-    return tz.parse_space({"n_wires": 4, "pitch_radius_mm": [1.0, 3.0], "length_mm": [15.0, 30.0],
-                           "wire_stiffness_N_per_mm": [55.0, 105.0], "wire_angle_offset_deg": [-10, 10],
-                           "sample": {"method": "halton", "designs": n_designs},
-                           "load_N": [5.0, 0.0, 0.0] if loaded else None})
+    return tz.parse_space(
+        {
+            "n_wires": 4,
+            "pitch_radius_mm": [1.0, 3.0],
+            "length_mm": [15.0, 30.0],
+            "wire_stiffness_N_per_mm": [55.0, 105.0],
+            "wire_angle_offset_deg": [-10, 10],
+            "sample": {"method": "halton", "designs": n_designs},
+            "load_N": [5.0, 0.0, 0.0] if loaded else None,
+        }
+    )
 
 
 _EXPLORE_CHILD = textwrap.dedent("""
@@ -375,11 +435,14 @@ def _loop_over_designs(space, rows, chunk_size=None):
     cols = space.columns(4)
     out = []
     for i in rows:
-        d = tz.Design(4, cols["length_mm"][i], cols["pitch_radius_mm"][i],
-                      wire_angles=np.radians([cols[f"wire_angle_{k}_deg"][i] for k in range(1, 5)]),
-                      wire_stiffness=cols["wire_stiffness_N_per_mm"][i])
-        res = sweep_grid(fn, d, space.theta_L, space.delta, *args, quiet=True,
-                         chunk_size=chunk_size or DEFAULT_CHUNK)
+        d = tz.Design(
+            4,
+            cols["length_mm"][i],
+            cols["pitch_radius_mm"][i],
+            wire_angles=np.radians([cols[f"wire_angle_{k}_deg"][i] for k in range(1, 5)]),
+            wire_stiffness=cols["wire_stiffness_N_per_mm"][i],
+        )
+        res = sweep_grid(fn, d, space.theta_L, space.delta, *args, quiet=True, chunk_size=chunk_size or DEFAULT_CHUNK)
         out.append([reduce[op](res[key].astype(float)) for _, key, op in _stats(loaded)])
     return np.array(out)
 
@@ -413,24 +476,32 @@ def bench_explore(quick):
             t_m.append(_seconds(lambda: _loop_over_designs(space, subset, chunk_size=n_poses)))  # noqa: B023
         t_explore = statistics.median(t_e)
         rows["loaded" if loaded else "kinematic"] = {
-            "designs": n_designs, "poses_per_design": n_poses,
-            "explore_s": t_explore, "explore_compile_s": compile_s,
+            "designs": n_designs,
+            "poses_per_design": n_poses,
+            "explore_s": t_explore,
+            "explore_compile_s": compile_s,
             "explore_designs_per_s": n_designs / t_explore,
             "explore_pose_evals_per_s": n_designs * n_poses / t_explore,
             "loop_designs_timed": n_loop,
             "loop_designs_per_s": n_loop / statistics.median(t_l),
             "loop_chunk_matched_designs_per_s": n_loop / statistics.median(t_m),
-            "speedup_vs_loop": statistics.median(
-                (a / n_loop) / (b / n_designs) for a, b in zip(t_l, t_e)),
+            "speedup_vs_loop": statistics.median((a / n_loop) / (b / n_designs) for a, b in zip(t_l, t_e)),
             "speedup_vs_loop_chunk_matched": statistics.median(
-                (a / n_loop) / (b / n_designs) for a, b in zip(t_m, t_e)),
+                (a / n_loop) / (b / n_designs) for a, b in zip(t_m, t_e)
+            ),
             "max_rel_difference_vs_loop": agree,
         }
     env = dict(os.environ)
     memory = []
     for n in (10**3, 10**4) if quick else (10**3, 10**4, 10**5):
-        r = subprocess.run([sys.executable, "-c", _EXPLORE_CHILD, str(n), "0", str(HERE)], env=env,
-                           capture_output=True, text=True, timeout=3600, check=False)
+        r = subprocess.run(
+            [sys.executable, "-c", _EXPLORE_CHILD, str(n), "0", str(HERE)],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=3600,
+            check=False,
+        )
         if r.returncode != 0:
             raise RuntimeError(r.stderr[-2000:])
         memory.append(json.loads(r.stdout.strip().splitlines()[-1]))
@@ -441,29 +512,45 @@ def markdown_explore(res) -> str:
     """The explore section's table (``benchmarks/README.md`` takes it by hand: its numbers come
     from their own run)."""
     e = res["explore"]
-    out = [("| statistics | designs x poses | explore: designs/s | explore: pose-evals/s | loop of "
+    out = [
+        (
+            "| statistics | designs x poses | explore: designs/s | explore: pose-evals/s | loop of "
             "`sweep_grid`: designs/s | loop, chunk = grid: designs/s | x loop | x loop (chunk = grid) | "
-            "compile (s) | max rel. difference |"), "|---|---|---|---|---|---|---|---|---|---|"]
+            "compile (s) | max rel. difference |"
+        ),
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for kind in ("kinematic", "loaded"):
         r = e[kind]
         loop_pe = r["loop_designs_per_s"] * r["poses_per_design"]
-        out.append(f"| {kind} | {r['designs']:.0e} x {r['poses_per_design']} | "
-                   f"{r['explore_designs_per_s']:.3g} | {r['explore_pose_evals_per_s']:.3g} | "
-                   f"{r['loop_designs_per_s']:.3g} ({loop_pe:.3g} pose-evals/s) | "
-                   f"{r['loop_chunk_matched_designs_per_s']:.3g} | {r['speedup_vs_loop']:.1f} | "
-                   f"{r['speedup_vs_loop_chunk_matched']:.1f} | {r['explore_compile_s']:.1f} | "
-                   f"{r['max_rel_difference_vs_loop']:.1e} |")
-    out += ["", ("| designs (kinematic, fresh process) | time incl. compile (s) | peak memory (MB) | "
-                 "table (MB) |"), "|---|---|---|---|"]
+        out.append(
+            f"| {kind} | {r['designs']:.0e} x {r['poses_per_design']} | "
+            f"{r['explore_designs_per_s']:.3g} | {r['explore_pose_evals_per_s']:.3g} | "
+            f"{r['loop_designs_per_s']:.3g} ({loop_pe:.3g} pose-evals/s) | "
+            f"{r['loop_chunk_matched_designs_per_s']:.3g} | {r['speedup_vs_loop']:.1f} | "
+            f"{r['speedup_vs_loop_chunk_matched']:.1f} | {r['explore_compile_s']:.1f} | "
+            f"{r['max_rel_difference_vs_loop']:.1e} |"
+        )
+    out += [
+        "",
+        ("| designs (kinematic, fresh process) | time incl. compile (s) | peak memory (MB) | table (MB) |"),
+        "|---|---|---|---|",
+    ]
     for m in e["memory"]:
-        out.append(f"| {m['designs']:.0e} | {m['seconds_with_compile']:.3g} | {m['peak_rss_mb']:.0f} | "
-                   f"{m['table_mb']:.2f} |")
+        out.append(
+            f"| {m['designs']:.0e} | {m['seconds_with_compile']:.3g} | {m['peak_rss_mb']:.0f} | {m['table_mb']:.2f} |"
+        )
     return "\n".join(out)
 
 
-SECTIONS = {"kinematics": bench_kinematics, "compliance": bench_compliance,
-            "scaling": bench_scaling, "calibration": bench_calibration,
-            "optimiser": bench_optimiser, "explore": bench_explore}
+SECTIONS = {
+    "kinematics": bench_kinematics,
+    "compliance": bench_compliance,
+    "scaling": bench_scaling,
+    "calibration": bench_calibration,
+    "optimiser": bench_optimiser,
+    "explore": bench_explore,
+}
 
 
 def main(argv=None):
@@ -473,8 +560,7 @@ def main(argv=None):
     p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
     p.add_argument("--only", nargs="*", choices=sorted(SECTIONS), help="run only these sections")
     args = p.parse_args(argv)
-    res = {"machine": machine(),
-           "command": "python benchmarks/run.py" + (" --quick" if args.quick else "")}
+    res = {"machine": machine(), "command": "python benchmarks/run.py" + (" --quick" if args.quick else "")}
     for name, fn in SECTIONS.items():
         if args.only and name not in args.only:
             continue

@@ -10,8 +10,11 @@ EXAMPLES = Path(__file__).parent / "examples"
 
 def list_examples() -> list[str]:
     """The example files, as names relative to the examples folder (``synthetic/unknown_a_3w.csv``)."""
-    return sorted(str(p.relative_to(EXAMPLES)) for p in EXAMPLES.rglob("*")
-                  if p.is_file() and p.name != "README.md" and "__pycache__" not in p.parts)
+    return sorted(
+        str(p.relative_to(EXAMPLES))
+        for p in EXAMPLES.rglob("*")
+        if p.is_file() and p.name != "README.md" and "__pycache__" not in p.parts
+    )
 
 
 def example_path(name: str) -> Path:
@@ -31,8 +34,9 @@ def copy_examples(dest, force: bool = False) -> list[Path]:
     names = list_examples()
     clash = [n for n in names if (dest / n).exists()]
     if clash and not force:
-        raise ValueError(f"{str(dest / clash[0])!r} already exists; pass force=True (--force) to replace "
-                         "the example files there")
+        raise ValueError(
+            f"{str(dest / clash[0])!r} already exists; pass force=True (--force) to replace the example files there"
+        )
     out = []
     for n in names:
         target = dest / n

@@ -100,9 +100,11 @@ def folder_lock(folder, command: str):
                 with contextlib.suppress(FileNotFoundError):
                     path.unlink()  # stale: its process was killed
                 continue
-            raise ValueError(f"{str(Path(folder))!r} is in use by another {command} (process {pid or '?'} on "
-                             f"{host or '?'}); wait for it to end or choose another folder (if no such process "
-                             f"runs, remove {str(path)!r})") from None
+            raise ValueError(
+                f"{str(Path(folder))!r} is in use by another {command} (process {pid or '?'} on "
+                f"{host or '?'}); wait for it to end or choose another folder (if no such process "
+                f"runs, remove {str(path)!r})"
+            ) from None
         with os.fdopen(fd, "w") as f:
             f.write(me + "\n")
         break

@@ -40,8 +40,21 @@ def huber_cost(r, w, c):
     return jnp.sum(w * rho)
 
 
-def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=-jnp.inf, hi=jnp.inf,
-                        max_iter=40, tol=1e-10, rows=None, cols=None, state=None, n_cols=None):
+def levenberg_marquardt(
+    fun,
+    theta0,
+    free=None,
+    weights=None,
+    huber=jnp.inf,
+    lo=-jnp.inf,
+    hi=jnp.inf,
+    max_iter=40,
+    tol=1e-10,
+    rows=None,
+    cols=None,
+    state=None,
+    n_cols=None,
+):
     """Minimise ``sum_i w_i rho(|fun(theta)_i|)`` over the ``free`` parameters within ``[lo, hi]``.
 
     Args:
@@ -116,12 +129,15 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
 
         def group(j, J):
             V = jax.lax.dynamic_slice_in_dim(basis, j * COL_GROUP, COL_GROUP)  # (G, P)
-            return jax.lax.dynamic_update_slice_in_dim(J, jnp.moveaxis(jax.vmap(lin)(V), 0, -1), j * COL_GROUP,
-                                                       axis=J.ndim - 1)
+            return jax.lax.dynamic_update_slice_in_dim(
+                J, jnp.moveaxis(jax.vmap(lin)(V), 0, -1), j * COL_GROUP, axis=J.ndim - 1
+            )
 
         return r, jax.lax.fori_loop(0, groups, group, jnp.zeros(r.shape + (K,), r.dtype)), s
 
-    r_shape = jax.eval_shape(res, theta0, state)[0].shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
+    r_shape = (
+        jax.eval_shape(res, theta0, state)[0].shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
+    )
     w = jnp.ones(r_shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
 
     def propose(th, r, J, lam):
@@ -162,7 +178,16 @@ def levenberg_marquardt(fun, theta0, free=None, weights=None, huber=jnp.inf, lo=
 
     dt = theta0.dtype
     start = jnp.clip(theta0, lo, hi)
-    carry = (start, jnp.zeros(r_shape, dt), jnp.zeros(r_shape + (K,), dt), jnp.asarray(jnp.inf, dt), start,
-             jnp.asarray(1e-3, dt), 0, False, state)
+    carry = (
+        start,
+        jnp.zeros(r_shape, dt),
+        jnp.zeros(r_shape + (K,), dt),
+        jnp.asarray(jnp.inf, dt),
+        start,
+        jnp.asarray(1e-3, dt),
+        0,
+        False,
+        state,
+    )
     th, r, J, cost, _, _, it, _, _ = jax.lax.while_loop(cond, body, carry)
     return th, cost, it, r, J[..., :K0]

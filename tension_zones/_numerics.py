@@ -114,7 +114,8 @@ def sinc_versinc_cubic(x, sin_x, cos_x):
     xs = jnp.where(small, jnp.ones_like(x), x)
     return tuple(
         jnp.where(small, jnp.polyval(jnp.asarray(coeffs[::-1], x2.dtype), x2), closed(xs, sin_x, cos_x))
-        for coeffs, closed in ((_SINC, _sinc_closed), (_VERSINC, _versinc_closed), (_CUBIC, _cubic_closed)))
+        for coeffs, closed in ((_SINC, _sinc_closed), (_VERSINC, _versinc_closed), (_CUBIC, _cubic_closed))
+    )
 
 
 def with_derivatives(f, x2, order=1):
@@ -194,6 +195,7 @@ def nan_where(bad, out):
     turn a NaN input into a plausible 0; this one select at the end restores it. ``bad`` is a scalar
     (a pose's inputs or the design's values); finite inputs keep their values and gradients.
     """
+
     def one(x):
         x = jnp.asarray(x)
         if jnp.issubdtype(x.dtype, jnp.inexact):
@@ -212,9 +214,10 @@ def not_finite(*xs):
 
 #: ``skew(w) = _CROSS @ w``: the cross-product matrix as one product with a constant (the nine
 #: elements written out traced about 28 operations per call, some 15 % of the calibration model).
-_CROSS = np.array([[[0, 0, 0], [0, 0, -1], [0, 1, 0]],
-                   [[0, 0, 1], [0, 0, 0], [-1, 0, 0]],
-                   [[0, -1, 0], [1, 0, 0], [0, 0, 0]]], dtype=np.float64)
+_CROSS = np.array(
+    [[[0, 0, 0], [0, 0, -1], [0, 1, 0]], [[0, 0, 1], [0, 0, 0], [-1, 0, 0]], [[0, -1, 0], [1, 0, 0], [0, 0, 0]]],
+    dtype=np.float64,
+)
 
 
 def skew(w):

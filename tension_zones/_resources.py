@@ -40,5 +40,7 @@ def check_memory(need: float, what: str, advice: str) -> None:
     :data:`MEMORY_SHARE` of the machine's memory; ``advice`` says what to do instead."""
     have = machine_memory()
     if have is not None and need > MEMORY_SHARE * have:
-        raise ValueError(f"{what} needs about {gb(need)} of memory (estimated), more than "
-                         f"{MEMORY_SHARE:.0%} of the {gb(have)} of memory here; {advice}")
+        raise ValueError(
+            f"{what} needs about {gb(need)} of memory (estimated), more than "
+            f"{MEMORY_SHARE:.0%} of the {gb(have)} of memory here; {advice}"
+        )

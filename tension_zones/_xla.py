@@ -51,8 +51,9 @@ def cache_dir(create: bool = True) -> str | None:
     env = os.environ.get("TENSION_ZONES_CACHE")
     if env is not None and env.strip().lower() in _OFF:
         return None
-    path = env or os.path.join(os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"),
-                               "tension-zones", "jax")
+    path = env or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "tension-zones", "jax"
+    )
     if not create:
         return path if _creatable(Path(path)) else None
     try:
@@ -184,9 +185,19 @@ def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = No
     arrays = (a if hasattr(a, "dtype") and hasattr(a, "shape") else jax.numpy.asarray(a) for a in leaves)
     avals = ";".join(f"{a.shape}{a.dtype}{getattr(a, 'weak_type', False)}" for a in arrays)
     x64 = jax.config.jax_enable_x64  # type: ignore[attr-defined]
-    ident = "|".join([_sources_digest(), jax.__version__, ".".join(map(str, _jaxlib_version())),
-                      jax.default_backend(), str(x64), str(tree), avals, key,
-                      repr(sorted((compiler_options or {}).items()))])
+    ident = "|".join(
+        [
+            _sources_digest(),
+            jax.__version__,
+            ".".join(map(str, _jaxlib_version())),
+            jax.default_backend(),
+            str(x64),
+            str(tree),
+            avals,
+            key,
+            repr(sorted((compiler_options or {}).items())),
+        ]
+    )
     path = Path(folder) / "programs" / f"{hashlib.sha256(ident.encode()).hexdigest()}.jaxexport"
     opts: dict[str, Any] = {"compiler_options": compiler_options} if compiler_options else {}
     if (exp := _read_program(path)) is not None:

@@ -29,10 +29,16 @@ MAX_WIRES = 256
 #: The largest sweep grid the command line takes: 10^7 poses hold 1.4 GB of kinematic results.
 MAX_SWEEP_POSES = 20_000_000
 #: Design fields -> the flags that set them (a design error names the flag).
-_FLAG_OF_FIELD = {"n_wires": "--wires", "length": "--length", "pitch_radius": "--pitch-radius",
-                  "wire_angles": "--angles", "wire_angles_deg": "--angles",
-                  "wire_stiffness": "--wire-stiffness", "backbone_EI": "--backbone-EI",
-                  "preload": "--preload"}
+_FLAG_OF_FIELD = {
+    "n_wires": "--wires",
+    "length": "--length",
+    "pitch_radius": "--pitch-radius",
+    "wire_angles": "--angles",
+    "wire_angles_deg": "--angles",
+    "wire_stiffness": "--wire-stiffness",
+    "backbone_EI": "--backbone-EI",
+    "preload": "--preload",
+}
 
 
 def _design_error(e: ValueError) -> CLIError:
@@ -60,14 +66,15 @@ def _design(args, length=20.0, pitch_radius=2.0):
     from .model._design import Design, _check_angles
 
     if args.wires > MAX_WIRES:
-        raise CLIError(f"--wires must be at most {MAX_WIRES} on the command line, got {args.wires} "
-                       "(tension_zones.Design takes any count)")
+        raise CLIError(
+            f"--wires must be at most {MAX_WIRES} on the command line, got {args.wires} "
+            "(tension_zones.Design takes any count)"
+        )
     angles = _parse_angles(getattr(args, "angles", None), args.wires)
     try:
         if angles is not None:
             _check_angles(angles, args.wires, field="wire_angles_deg")  # its message in degrees
-        return Design(args.wires, length, pitch_radius,
-                      wire_angles=None if angles is None else np.radians(angles))
+        return Design(args.wires, length, pitch_radius, wire_angles=None if angles is None else np.radians(angles))
     except ValueError as e:
         raise _design_error(e) from None
 
@@ -79,8 +86,9 @@ def _probe_writable(folder: Path, flag: str) -> None:
     try:
         fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tension-zones-probe-")
     except OSError as e:
-        raise CLIError(f"{flag}: cannot write in the folder {str(folder)!r} "
-                       f"({e.strerror or type(e).__name__})") from None
+        raise CLIError(
+            f"{flag}: cannot write in the folder {str(folder)!r} ({e.strerror or type(e).__name__})"
+        ) from None
     os.close(fd)
     os.unlink(tmp)
 
@@ -98,8 +106,7 @@ def _check_out_file(path: str, suffix: str, force: bool = False, flag: str = "--
     if not p.parent.is_dir():
         raise CLIError(f"the folder of {flag} is a file: {str(p.parent)!r}")
     if p.exists() and not force:
-        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another "
-                       "name")
+        raise CLIError(f"{flag} {path!r} exists; pass --force to overwrite it, or choose another name")
     _probe_writable(p.parent, flag)
     return p
 
@@ -112,12 +119,16 @@ def _check_out_dir(path: str, force: bool = False, names=None, flag: str = "--ou
     if out.exists() and not out.is_dir():
         raise CLIError(f"{flag} must be a folder, {path!r} is a file")
     if out.is_dir():
-        held = (sorted(n for n in names if (out / n).exists()) if names is not None
-                else sorted(p.name for p in out.iterdir()))
+        held = (
+            sorted(n for n in names if (out / n).exists())
+            if names is not None
+            else sorted(p.name for p in out.iterdir())
+        )
         if held and not force:
             more = f" and {len(held) - 1} more" if len(held) > 1 else ""
-            raise CLIError(f"{flag} {path!r} already holds {held[0]!r}{more}; pass --force to "
-                           "overwrite, or choose another folder")
+            raise CLIError(
+                f"{flag} {path!r} already holds {held[0]!r}{more}; pass --force to overwrite, or choose another folder"
+            )
         _probe_writable(out, flag)
     else:
         if not out.parent.is_dir():
@@ -171,13 +182,16 @@ def cmd_optimize(args) -> None:
     if best is None:
         print("no feasible design: see result.json for each wire count's violations")
     else:
-        print(f"best: {best['n_wires']} wires, r = {best['pitch_radius_mm']:.4g} mm, "
-              f"k_w = {best['wire_stiffness_N_per_mm']:.4g} N/mm, angles = "
-              f"{', '.join(f'{a:.1f}' for a in best['wire_angles_deg'])} deg, "
-              f"objective {best['objective']:.4g}")
+        print(
+            f"best: {best['n_wires']} wires, r = {best['pitch_radius_mm']:.4g} mm, "
+            f"k_w = {best['wire_stiffness_N_per_mm']:.4g} N/mm, angles = "
+            f"{', '.join(f'{a:.1f}' for a in best['wire_angles_deg'])} deg, "
+            f"objective {best['objective']:.4g}"
+        )
     if not args.quiet:
         for p in paths:
             print(f"wrote {p}")
+
 
 # ---- sweep: workspace performance maps ------------------------------------------------
 def _kinematics_measure(args):
@@ -235,8 +249,9 @@ def cmd_sweep(args) -> None:
     design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
     if args.compliance:
         try:
-            design = design.replace(wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI,
-                                    preload=args.preload or 0.0)
+            design = design.replace(
+                wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI, preload=args.preload or 0.0
+            )
         except ValueError as e:
             raise _design_error(e) from None
     for name in ("theta_step", "delta_step", "dq"):
@@ -245,13 +260,17 @@ def cmd_sweep(args) -> None:
     steps = (args.theta_step or 5.0, args.delta_step or 2.5)
     for flag, step, span in (("--theta-step", steps[0], 85.0), ("--delta-step", steps[1], 360.0)):
         if step > span:  # a grid of its start alone
-            raise CLIError(f"{flag} {step:g} leaves {grid_size(span, step)} grid point on 0..{span:g} deg; "
-                           f"it must be at most {span:g}")
+            raise CLIError(
+                f"{flag} {step:g} leaves {grid_size(span, step)} grid point on 0..{span:g} deg; "
+                f"it must be at most {span:g}"
+            )
     size = grid_size(85.0, steps[0]) * grid_size(360.0, steps[1])
     if size > MAX_SWEEP_POSES:  # checked before the grid is built
-        raise CLIError(f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} "
-                       f"poses; the command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid "
-                       "from Python takes more)")
+        raise CLIError(
+            f"--theta-step {steps[0]:g} and --delta-step {steps[1]:g} make {size:,} "
+            f"poses; the command line sweeps at most {MAX_SWEEP_POSES:,} (sweep_grid "
+            "from Python takes more)"
+        )
     if args.compliance and args.theta_step is None:
         theta_deg = np.asarray(PAPER_THETA_L_DEG)  # the paper's Sec. 6.2 grid
     else:
@@ -261,8 +280,15 @@ def cmd_sweep(args) -> None:
     else:
         delta_deg = grid_deg(360.0, steps[1])
     fn, extra = _with_compliance(args) if args.compliance else SWEEP_MEASURES[args.measure](args)
-    res = sweep_grid(fn, design, np.radians(theta_deg), np.radians(delta_deg), *extra,
-                     quiet=args.quiet, desc="sweep" + (" + compliance" if args.compliance else ""))
+    res = sweep_grid(
+        fn,
+        design,
+        np.radians(theta_deg),
+        np.radians(delta_deg),
+        *extra,
+        quiet=args.quiet,
+        desc="sweep" + (" + compliance" if args.compliance else ""),
+    )
     th, de = np.meshgrid(theta_deg, delta_deg, indexing="ij")
     from ._io import atomic_path
 
@@ -271,8 +297,10 @@ def cmd_sweep(args) -> None:
     if not args.quiet:
         print(f"wrote {out}: {th.shape[0]} x {th.shape[1]} poses, {len(res) + 2} arrays")
         if args.compliance and not np.all(res["feasible"]):
-            print(f"note: {int(np.sum(~res['feasible']))} poses cannot be held without pushing "
-                  "(feasible = False, deflections NaN there)")
+            print(
+                f"note: {int(np.sum(~res['feasible']))} poses cannot be held without pushing "
+                "(feasible = False, deflections NaN there)"
+            )
 
 
 def _add_sweep_parser(sub) -> None:
@@ -281,17 +309,28 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument("--length", type=float, required=True, help="segment length L (mm)")
     s.add_argument("--pitch-radius", type=float, required=True, help="wire pitch radius r (mm)")
     s.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
-    s.add_argument("--theta-step", type=float, default=None,
-                   help="theta_L step (deg), 0..85 (default 5; with --compliance the paper's "
-                        "Sec. 6.2 grid linspace(89, 45, 10))")
-    s.add_argument("--delta-step", type=float, default=None,
-                   help="delta step (deg), 0..360 (default 2.5; with --compliance 15)")
+    s.add_argument(
+        "--theta-step",
+        type=float,
+        default=None,
+        help="theta_L step (deg), 0..85 (default 5; with --compliance the paper's Sec. 6.2 grid linspace(89, 45, 10))",
+    )
+    s.add_argument(
+        "--delta-step", type=float, default=None, help="delta step (deg), 0..360 (default 2.5; with --compliance 15)"
+    )
     s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
-    s.add_argument("--measure", choices=sorted(SWEEP_MEASURES), default="kinematics",
-                   help="which per-pose measures to sweep (default: kinematics)")
+    s.add_argument(
+        "--measure",
+        choices=sorted(SWEEP_MEASURES),
+        default="kinematics",
+        help="which per-pose measures to sweep (default: kinematics)",
+    )
     c = s.add_argument_group("compliance: tension-only statics")
-    c.add_argument("--compliance", action="store_true",
-                   help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible")
+    c.add_argument(
+        "--compliance",
+        action="store_true",
+        help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible",
+    )
     c.add_argument("--wire-stiffness", type=float, help="k_w (N/mm)")
     c.add_argument("--backbone-EI", type=float, help="backbone bending stiffness EI (N mm^2)")
     c.add_argument("--load", help="tip force FX,FY,FZ (N, base frame), or six wrench components")
@@ -341,13 +380,18 @@ def cmd_calibrate(args) -> None:
             known = [e.name for e in default_library(data.frame, OPT_IN)]
             unknown = [n for n in [n.lstrip("+").strip() for n in names] if n not in known]
             if unknown:
-                raise CLIError(f"--effects: unknown effect {unknown[0]!r}; candidates for these data: "
-                               f"{', '.join(known)}")
+                raise CLIError(
+                    f"--effects: unknown effect {unknown[0]!r}; candidates for these data: {', '.join(known)}"
+                )
             if extra and len(extra) < len(names):
-                raise CLIError("--effects: either a list of effects or +NAME additions to the default library, "
-                               "not both")
-            library = (default_library(data.frame, [n for n in extra if n in OPT_IN]) if extra
-                       else tuple(BY_NAME[n] for n in names))
+                raise CLIError(
+                    "--effects: either a list of effects or +NAME additions to the default library, not both"
+                )
+            library = (
+                default_library(data.frame, [n for n in extra if n in OPT_IN])
+                if extra
+                else tuple(BY_NAME[n] for n in names)
+            )
         data, val, first = _calibration_size(args, data, val, robot.n_segments)
 
         def say(line):  # the estimate first, once the calibration has checked its inputs
@@ -355,22 +399,32 @@ def cmd_calibrate(args) -> None:
                 print(first.pop(), file=sys.stderr)
             print(line, file=sys.stderr)
 
-        res = calibrate(data, robot, validate=val, library=library,
-                        holdout=0.25 if args.holdout is None else args.holdout, robust=args.robust,
-                        log=None if args.quiet else say,
-                        workers=args.workers)
+        res = calibrate(
+            data,
+            robot,
+            validate=val,
+            library=library,
+            holdout=0.25 if args.holdout is None else args.holdout,
+            robust=args.robust,
+            log=None if args.quiet else say,
+            workers=args.workers,
+        )
     except DataError as e:
         raise CLIError(str(e)) from None
     report = write_report(res, out, design=str(args.design), validate=args.validate)
     found = ", ".join(e["name"] for e in report["effects"]) or "none"
-    line = (f"held-out RMSE: declared {report['rmse_declared_mm']:.4f} mm, nominal fit "
-            f"{report['rmse_before_mm']:.4f} mm, after {report['rmse_after_mm']:.4f} mm "
-            f"(noise floor {report['noise_floor_mm']:.4f} mm); effects added: {found}; "
-            f"unexplained structure: {'yes' if report['unexplained_structure'] else 'no'}; "
-            f"dropped rows: {report['dropped_rows']}")
+    line = (
+        f"held-out RMSE: declared {report['rmse_declared_mm']:.4f} mm, nominal fit "
+        f"{report['rmse_before_mm']:.4f} mm, after {report['rmse_after_mm']:.4f} mm "
+        f"(noise floor {report['noise_floor_mm']:.4f} mm); effects added: {found}; "
+        f"unexplained structure: {'yes' if report['unexplained_structure'] else 'no'}; "
+        f"dropped rows: {report['dropped_rows']}"
+    )
     if val is not None:
-        line += (f"; validation RMSE {report['rmse_validate_mm']:.4f} mm (mean offset removed "
-                 f"{report['rmse_validate_aligned_mm']:.4f} mm)")
+        line += (
+            f"; validation RMSE {report['rmse_validate_mm']:.4f} mm (mean offset removed "
+            f"{report['rmse_validate_aligned_mm']:.4f} mm)"
+        )
         for k, b in (report.get("baselines") or {}).items():
             line += f"; {k} baseline {b['rmse_validate_mm']:.4f} mm"
     if report["warnings"]:
@@ -394,14 +448,19 @@ def _calibration_size(args, data, val, n_segments: int):
     n = data.n_samples + (0 if val is None else val.n_samples)
     workers = worker_count(args.workers, n * n_segments)
     need = peak_memory(n * n_segments, workers)
-    what = (f"calibrating {n:,} samples x {n_segments} segment(s)"
-            + (f" with {workers} worker process(es)" if workers else ""))
+    what = f"calibrating {n:,} samples x {n_segments} segment(s)" + (
+        f" with {workers} worker process(es)" if workers else ""
+    )
     if not args.force:
         have = machine_memory() or 0
         fits = (MEMORY_SHARE * have / (1 + workers) - MEMORY_BASE) / (MEMORY_PER_SAMPLE * n_segments)
         k = math.ceil(n * (args.subsample or 1) / fits) if fits > 0 else 0
-        check_memory(need, what, (f"pass --subsample {k} (one sample in {k}, in acquisition order)" if k
-                                  else "pass fewer --workers") + " or --force to run it anyway")
+        check_memory(
+            need,
+            what,
+            (f"pass --subsample {k} (one sample in {k}, in acquisition order)" if k else "pass fewer --workers")
+            + " or --force to run it anyway",
+        )
     return data, val, [f"{what}: about {gb(need)} of memory (estimated)"]
 
 
@@ -416,8 +475,9 @@ def _out_dir(path: str, names=(), force: bool = False) -> Path:
         raise CLIError(f"--out must be a folder, {str(out)!r} is a file")
     old = [n for n in names if (out / n).exists()]
     if old and not force:
-        raise CLIError(f"--out {str(out)!r} already holds a report ({old[0]}); pass --force to replace it "
-                       "or choose another folder")
+        raise CLIError(
+            f"--out {str(out)!r} already holds a report ({old[0]}); pass --force to replace it or choose another folder"
+        )
     parent = out
     while not parent.exists():
         parent = parent.parent
@@ -452,43 +512,64 @@ def _add_examples_parser(sub) -> None:
 
 def _add_calibrate_parser(sub) -> None:
     c = sub.add_parser("calibrate", help="fit a robot to tracker data, find and add missing effects")
-    c.add_argument("data", help="measurement CSV (tension_zones/MODEL.md Sec. 6, or the OpenCR format with --format opencr)")
-    c.add_argument("--design", required=True,
-                   help="design JSON: one segment, or {\"segments\": [...]} for several")
+    c.add_argument(
+        "data", help="measurement CSV (tension_zones/MODEL.md Sec. 6, or the OpenCR format with --format opencr)"
+    )
+    c.add_argument("--design", required=True, help='design JSON: one segment, or {"segments": [...]} for several')
     c.add_argument("--out", required=True, help="output folder (report.json, report.md, plots)")
-    c.add_argument("--format", choices=("model", "opencr"), default="model",
-                   help="the data files' reader: model (tension_zones/MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
-                        "servo_<id>_mm recordings)")
+    c.add_argument(
+        "--format",
+        choices=("model", "opencr"),
+        default="model",
+        help="the data files' reader: model (tension_zones/MODEL.md Sec. 6, default) or opencr (the OpenCR lab's "
+        "servo_<id>_mm recordings)",
+    )
     c.add_argument("--validate", help="a second recording of the same robot, only predicted after the selection")
-    c.add_argument("--effects", help="candidate effects, comma-separated (default: the library but for the opt-in "
-                   "bending_friction); +NAME adds an opt-in effect to the default library, e.g. +bending_friction")
-    c.add_argument("--holdout", type=float, default=None,
-                   help="fraction held out for the decisions (default 0.25: the tail of the acquisition "
-                        "order, or every 4th pattern group of a labelled recording)")
+    c.add_argument(
+        "--effects",
+        help="candidate effects, comma-separated (default: the library but for the opt-in "
+        "bending_friction); +NAME adds an opt-in effect to the default library, e.g. +bending_friction",
+    )
+    c.add_argument(
+        "--holdout",
+        type=float,
+        default=None,
+        help="fraction held out for the decisions (default 0.25: the tail of the acquisition "
+        "order, or every 4th pattern group of a labelled recording)",
+    )
     c.add_argument("--robust", action="store_true", help="Huber loss (tracker glitches)")
-    c.add_argument("--drop-bad", action="store_true",
-                   help="drop isolated bad rows (listed in the report) instead of failing")
-    c.add_argument("--force", action="store_true",
-                   help="replace an existing report in --out; run a recording whose memory estimate is beyond "
-                        "what the computer has")
-    c.add_argument("--subsample", type=int, metavar="K",
-                   help="keep every Kth sample of the recordings (in acquisition order), e.g. for one too large "
-                        "for the computer's memory")
-    c.add_argument("--workers", type=int, default=None,
-                   help="processes running the loop's independent fits alongside this one (default: one per "
-                        "spare core, at most 4, for 1024 samples x segments or more; 0: none; a count asked for "
-                        "is capped at one per spare core); the report is the same with any")
+    c.add_argument(
+        "--drop-bad", action="store_true", help="drop isolated bad rows (listed in the report) instead of failing"
+    )
+    c.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing report in --out; run a recording whose memory estimate is beyond "
+        "what the computer has",
+    )
+    c.add_argument(
+        "--subsample",
+        type=int,
+        metavar="K",
+        help="keep every Kth sample of the recordings (in acquisition order), e.g. for one too large "
+        "for the computer's memory",
+    )
+    c.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        help="processes running the loop's independent fits alongside this one (default: one per "
+        "spare core, at most 4, for 1024 samples x segments or more; 0: none; a count asked for "
+        "is capped at one per spare core); the report is the same with any",
+    )
     c.add_argument("--quiet", action="store_true", help="only the one-line summary")
     c.set_defaults(func=cmd_calibrate)
-
-
 
 
 # ---- explore: design-space exploration ----------------------------------------------
 def _init_distributed(args) -> None:
     """Join a ``jax.distributed`` run (before anything touches a JAX device)."""
-    given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes,
-             "--process-id": args.process_id}
+    given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
     if not args.distributed and all(v is None for v in given.values()):
         return
     _positive("--coordinator-timeout", args.coordinator_timeout)
@@ -496,8 +577,11 @@ def _init_distributed(args) -> None:
     if len(missing) < 3:  # explicit coordinates: all three
         if missing:
             raise CLIError(f"{', '.join(given)} go together: {missing[0]} is missing")
-        kw = {"coordinator_address": args.coordinator, "num_processes": args.num_processes,
-              "process_id": args.process_id}
+        kw = {
+            "coordinator_address": args.coordinator,
+            "num_processes": args.num_processes,
+            "process_id": args.process_id,
+        }
         if args.process_id != 0:
             _wait_for_coordinator(args.coordinator, args.coordinator_timeout)
     else:  # --distributed: the cluster's environment says (SLURM, Open MPI, ...)
@@ -528,8 +612,10 @@ def _wait_for_coordinator(address: str, timeout: float) -> None:
         except OSError as e:
             reason = e.strerror or type(e).__name__
         if time.monotonic() >= deadline:
-            raise CLIError(f"--coordinator {address} did not answer within {timeout:g} s ({reason}); start "
-                           "process 0 first, check the address, or raise --coordinator-timeout")
+            raise CLIError(
+                f"--coordinator {address} did not answer within {timeout:g} s ({reason}); start "
+                "process 0 first, check the address, or raise --coordinator-timeout"
+            )
         time.sleep(0.25)
 
 
@@ -556,31 +642,45 @@ def cmd_explore(args) -> None:
     paths = write_front(table, args.out, front)
     print(summary(table, time.perf_counter() - t0, front))
     if not args.quiet:
-        print(f"wrote {Path(args.out) / 'table.npz'}, table.csv, manifest.json and "
-              f"{', '.join(p.name for p in paths)}")
+        print(f"wrote {Path(args.out) / 'table.npz'}, table.csv, manifest.json and {', '.join(p.name for p in paths)}")
 
 
 def _add_explore_parser(sub) -> None:
-    e = sub.add_parser("explore", help="explore a design space: per-design workspace statistics, "
-                                       "Pareto front, plots (resumable)")
+    e = sub.add_parser(
+        "explore", help="explore a design space: per-design workspace statistics, Pareto front, plots (resumable)"
+    )
     e.add_argument("--space", required=True, help="design-space JSON (keys: tension_zones/design/README.md)")
-    e.add_argument("--out", required=True,
-                   help="output folder: new or empty, or holding this same exploration (resumed)")
-    e.add_argument("--front", help="two or three table columns for the Pareto front, comma-separated, "
-                                   "each optionally min:/max: (default: pitch_radius_mm, "
-                                   "dp_max_reduced_worst, and deflection_mm_reduced_worst with a load, "
-                                   "else controllable_fraction)")
+    e.add_argument(
+        "--out", required=True, help="output folder: new or empty, or holding this same exploration (resumed)"
+    )
+    e.add_argument(
+        "--front",
+        help="two or three table columns for the Pareto front, comma-separated, "
+        "each optionally min:/max: (default: pitch_radius_mm, "
+        "dp_max_reduced_worst, and deflection_mm_reduced_worst with a load, "
+        "else controllable_fraction)",
+    )
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     d = e.add_argument_group("several processes and hosts (jax.distributed)")
-    d.add_argument("--distributed", action="store_true",
-                   help="join a jax.distributed run whose coordinates the cluster gives (e.g. under srun)")
+    d.add_argument(
+        "--distributed",
+        action="store_true",
+        help="join a jax.distributed run whose coordinates the cluster gives (e.g. under srun)",
+    )
     d.add_argument("--coordinator", help="HOST:PORT of process 0 (with --num-processes, --process-id)")
     d.add_argument("--num-processes", type=int, help="number of processes")
     d.add_argument("--process-id", type=int, help="this process's index, 0 .. N-1")
-    d.add_argument("--coordinator-timeout", type=float, default=60.0, metavar="S",
-                   help="seconds to wait for the coordinator (process 0) to answer, and for every process "
-                        "to join, before giving up (default 60)")
+    d.add_argument(
+        "--coordinator-timeout",
+        type=float,
+        default=60.0,
+        metavar="S",
+        help="seconds to wait for the coordinator (process 0) to answer, and for every process "
+        "to join, before giving up (default 60)",
+    )
     e.set_defaults(func=cmd_explore)
+
+
 # ---- end explore -------------------------------------------------------------------------------
 
 
@@ -612,7 +712,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=cmd_maps)
 
     o = sub.add_parser("optimize", help="search wire count, pitch radius, stiffness and placement")
-    o.add_argument("--scenario", required=True, help="scenario JSON (keys: tension_zones/design/README.md; examples: tension-zones examples)")
+    o.add_argument(
+        "--scenario",
+        required=True,
+        help="scenario JSON (keys: tension_zones/design/README.md; examples: tension-zones examples)",
+    )
     o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
     _add_force(o, "an earlier result in --out")
     o.add_argument("--quiet", action="store_true", help="no progress bar")

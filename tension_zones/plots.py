@@ -85,9 +85,17 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         sectors = [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
     for s in sectors:
         if s.width_deg > 0:
-            ax.add_patch(Wedge((0, 0), 1.0, s.start_deg, s.end_deg,
-                               fc=_count_colour(s.n_taut, present), ec="white",
-                               lw=1.0 if not many else 0.4))
+            ax.add_patch(
+                Wedge(
+                    (0, 0),
+                    1.0,
+                    s.start_deg,
+                    s.end_deg,
+                    fc=_count_colour(s.n_taut, present),
+                    ec="white",
+                    lw=1.0 if not many else 0.4,
+                )
+            )
             mid = np.radians(0.5 * (s.start_deg + s.end_deg))
             rad = 0.62 if s.width_deg > 25 else 0.8
             if not many:
@@ -101,26 +109,49 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
             a = np.radians(s.start_deg)
             ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2 if not many else 0.5)
             if not many:
-                ax.text(1.0 * np.cos(a) * 0.45, 1.0 * np.sin(a) * 0.45, f"{s.n_taut}",
-                        fontsize=8, ha="center", va="center",
-                        bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": "k", "lw": 0.6})
+                ax.text(
+                    1.0 * np.cos(a) * 0.45,
+                    1.0 * np.sin(a) * 0.45,
+                    f"{s.n_taut}",
+                    fontsize=8,
+                    ha="center",
+                    va="center",
+                    bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": "k", "lw": 0.6},
+                )
     for k, (a, b) in enumerate(tmap.zones_deg):
         r_out = ring0 + (k + 1) * ring_w
-        ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n),
-                           ec="none", alpha=0.85))
+        ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n), ec="none", alpha=0.85))
         if k % ring_step == 0:
             mid = np.radians(0.5 * (a + b))
             r_txt = r_out - (0.04 if not many else 0.4 * ring_w)
-            ax.text(r_txt * np.cos(mid), r_txt * np.sin(mid), str(k + 1), ha="center",
-                    va="center", fontsize=7 if not many else 5,
-                    color="white" if not many else "k", fontweight="bold")
+            ax.text(
+                r_txt * np.cos(mid),
+                r_txt * np.sin(mid),
+                str(k + 1),
+                ha="center",
+                va="center",
+                fontsize=7 if not many else 5,
+                color="white" if not many else "k",
+                fontweight="bold",
+            )
     r_max = ring0 + (n + 1) * ring_w
     for deg in range(0, 360, 30):
         a = np.radians(deg)
-        ax.plot([r_max * np.cos(a), (r_max + 0.04) * np.cos(a)],
-                [r_max * np.sin(a), (r_max + 0.04) * np.sin(a)], color="0.3", lw=0.8)
-        ax.text((r_max + 0.13) * np.cos(a), (r_max + 0.13) * np.sin(a), f"{deg}°",
-                ha="center", va="center", fontsize=8, color="0.3")
+        ax.plot(
+            [r_max * np.cos(a), (r_max + 0.04) * np.cos(a)],
+            [r_max * np.sin(a), (r_max + 0.04) * np.sin(a)],
+            color="0.3",
+            lw=0.8,
+        )
+        ax.text(
+            (r_max + 0.13) * np.cos(a),
+            (r_max + 0.13) * np.sin(a),
+            f"{deg}°",
+            ha="center",
+            va="center",
+            fontsize=8,
+            color="0.3",
+        )
     ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
     # a legend of at most eight entries
     counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]
@@ -129,8 +160,7 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
     if any(s.width_deg == 0 for s in sectors):
         handles.append(plt.Line2D([], [], ls="--", color="k"))
         labels.append("single direction" + (" (circled: taut count)" if not many else ""))
-    ax.legend(handles, labels, loc="lower left", fontsize=8, frameon=False,
-              bbox_to_anchor=(-0.05, -0.08))
+    ax.legend(handles, labels, loc="lower left", fontsize=8, frameon=False, bbox_to_anchor=(-0.05, -0.08))
     lim = r_max + 0.3
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
@@ -140,8 +170,7 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
         title = f"Tension map, {n} wires"
         if tmap.phase_deg:
             title += f" (zones shifted {tmap.phase_deg:.1f}° by δ̇)"
-    ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone",
-                 fontsize=10)
+    ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone", fontsize=10)
     return ax
 
 
@@ -158,18 +187,30 @@ def plot_tradeoff(result: dict, path):
     ):
         y = [r[key] for r in rows]
         ax.plot(n, y, "-", color="0.6")
-        ax.scatter([a for a, f in zip(n, feas) if f], [b for b, f in zip(y, feas) if f],
-                   color="tab:blue", zorder=3, label="feasible")
-        ax.scatter([a for a, f in zip(n, feas) if not f], [b for b, f in zip(y, feas) if not f],
-                   color="tab:red", marker="x", zorder=3, label="infeasible")
+        ax.scatter(
+            [a for a, f in zip(n, feas) if f],
+            [b for b, f in zip(y, feas) if f],
+            color="tab:blue",
+            zorder=3,
+            label="feasible",
+        )
+        ax.scatter(
+            [a for a, f in zip(n, feas) if not f],
+            [b for b, f in zip(y, feas) if not f],
+            color="tab:red",
+            marker="x",
+            zorder=3,
+            label="infeasible",
+        )
         ax.set_xlabel("number of wires")
         ax.set_ylabel(label)
         ax.set_xticks(n)
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     best = result.get("best")
-    fig.suptitle("Trade-off against the wire count"
-                 + (f" (best: {best['n_wires']} wires)" if best else " (no feasible design)"))
+    fig.suptitle(
+        "Trade-off against the wire count" + (f" (best: {best['n_wires']} wires)" if best else " (no feasible design)")
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
@@ -204,8 +245,7 @@ def _label(column: str) -> str:
 def _by_wire_count(table):
     """``[(n, rows, colour)]`` for each wire count of an exploration table."""
     counts = sorted(set(np.asarray(table["n_wires"]).tolist()))
-    return [(n, np.asarray(table["n_wires"]) == n, plt.get_cmap("tab10")(i % 10))
-            for i, n in enumerate(counts)]
+    return [(n, np.asarray(table["n_wires"]) == n, plt.get_cmap("tab10")(i % 10)) for i, n in enumerate(counts)]
 
 
 def plot_front(table: dict, columns, front, path=None):
@@ -220,10 +260,8 @@ def plot_front(table: dict, columns, front, path=None):
     for ax, (i, j) in zip(axes[0], pairs):
         x, y = (np.asarray(table[columns[k]], float) for k in (i, j))
         for n, rows, colour in _by_wire_count(table):
-            ax.scatter(x[rows & ~front], y[rows & ~front], s=6, color=colour, alpha=0.35, lw=0,
-                       label=f"{n} wires")
-            ax.scatter(x[rows & front], y[rows & front], s=34, color=colour, edgecolor="k", lw=0.8,
-                       zorder=3)
+            ax.scatter(x[rows & ~front], y[rows & ~front], s=6, color=colour, alpha=0.35, lw=0, label=f"{n} wires")
+            ax.scatter(x[rows & front], y[rows & front], s=34, color=colour, edgecolor="k", lw=0.8, zorder=3)
         if len(columns) == 2 and front.any():
             # the edge of what the front dominates: a point's value holds until the next point when x
             # is minimised (it dominates larger x), from the previous one when x is maximised
@@ -236,8 +274,11 @@ def plot_front(table: dict, columns, front, path=None):
     handles = axes[0][0].get_legend_handles_labels()[0]
     handles.append(plt.Line2D([], [], ls="", marker="o", mfc="w", mec="k", label="Pareto front"))
     axes[0][0].legend(handles=handles, fontsize=8, markerscale=1.5)
-    fig.suptitle(f"{len(front)} designs, {int(front.sum())} on the Pareto front of\n"
-                 f"{', '.join(columns)}" + (" (projected)" if len(columns) == 3 else ""), fontsize=10)
+    fig.suptitle(
+        f"{len(front)} designs, {int(front.sum())} on the Pareto front of\n"
+        f"{', '.join(columns)}" + (" (projected)" if len(columns) == 3 else ""),
+        fontsize=10,
+    )
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=120)
@@ -253,13 +294,21 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
     from matplotlib.collections import LineCollection
 
     columns = [objective(c)[0] for c in columns]
+
     def varies(v):
         v = np.asarray(v, float)
         return np.unique(v[np.isfinite(v)]).size > 1
 
     if fields is None:
-        fields = [k for k in table if k != "design" and k not in STATS and k not in columns
-                  and not k.startswith("wire_angle_") and varies(table[k])]
+        fields = [
+            k
+            for k in table
+            if k != "design"
+            and k not in STATS
+            and k not in columns
+            and not k.startswith("wire_angle_")
+            and varies(table[k])
+        ]
     axes_names = fields + list(columns)
     V = np.stack([np.asarray(table[k], float) for k in axes_names], axis=1)
     lo, hi = np.nanmin(V, axis=0), np.nanmax(V, axis=0)
@@ -269,12 +318,17 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
     fig, ax = plt.subplots(figsize=(max(6.0, 1.7 * len(axes_names)), 4.8))
     rest = np.flatnonzero(~front)
     rest = rest[np.linspace(0, rest.size - 1, min(rest.size, max_lines)).astype(int)] if rest.size else rest
-    ax.add_collection(LineCollection([np.column_stack([xs, U[i]]) for i in rest], colors="0.7",
-                                     lw=0.4, alpha=0.4))
+    ax.add_collection(LineCollection([np.column_stack([xs, U[i]]) for i in rest], colors="0.7", lw=0.4, alpha=0.4))
     for n, rows, colour in _by_wire_count(table):
         sel = np.flatnonzero(rows & front)
-        ax.add_collection(LineCollection([np.column_stack([xs, U[i]]) for i in sel], colors=[colour],
-                                         lw=1.2, label=f"front, {n} wires ({sel.size})"))
+        ax.add_collection(
+            LineCollection(
+                [np.column_stack([xs, U[i]]) for i in sel],
+                colors=[colour],
+                lw=1.2,
+                label=f"front, {n} wires ({sel.size})",
+            )
+        )
     for k, name in enumerate(axes_names):
         ax.axvline(k, color="k", lw=0.6)
         ax.text(k, -0.06, f"{lo[k]:.3g}", ha="center", va="top", fontsize=7)
@@ -285,8 +339,11 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
     ax.set_ylim(-0.12, 1.12)
     ax.set_yticks([])
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    ax.set_title(f"Parallel coordinates: {int(front.sum())} front designs (colour), "
-                 f"{rest.size} of the others (grey); axes scaled min..max", fontsize=10)
+    ax.set_title(
+        f"Parallel coordinates: {int(front.sum())} front designs (colour), "
+        f"{rest.size} of the others (grey); axes scaled min..max",
+        fontsize=10,
+    )
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=120)

@@ -156,12 +156,9 @@ class RodSolution:
         bc = np.max(np.abs(pr.bc(self.bvp.y[:, 0], self.bvp.y[:, -1])))
         Rt = np.einsum("mji,mjk->mik", self.R, self.R)
         ortho = np.max(np.abs(Rt - np.eye(3)))
-        K = np.concatenate(
-            [np.tile(seg.stiffness(), (n, 1)) for seg, n in zip(pr.segments, pr.counts)]
-        )
+        K = np.concatenate([np.tile(seg.stiffness(), (n, 1)) for seg, n in zip(pr.segments, pr.counts)])
         cons = np.max(np.abs(np.einsum("mij,mj->mi", self.R, K * self.u) - self.m_backbone))
-        return {"ode": float(ode), "bc": float(bc), "orthogonality": float(ortho),
-                "constitutive": float(cons)}
+        return {"ode": float(ode), "bc": float(bc), "orthogonality": float(ortho), "constitutive": float(cons)}
 
 
 class _Problem:
@@ -239,11 +236,13 @@ class _Problem:
             beta = 1.0 + u[0] * ry - u[1] * rx
             na = np.sqrt(beta**2 + rho2 * u[2] ** 2)
             w = beta / na
-            un = np.stack([
-                (c[0] - (tau * ry * w).sum(0)) / K[0],
-                (c[1] + (tau * rx * w).sum(0)) / K[1],
-                c[2] / (K[2] + (tau * rho2 / na).sum(0)),
-            ])
+            un = np.stack(
+                [
+                    (c[0] - (tau * ry * w).sum(0)) / K[0],
+                    (c[1] + (tau * rx * w).sum(0)) / K[1],
+                    c[2] / (K[2] + (tau * rho2 / na).sum(0)),
+                ]
+            )
             du = np.max(np.abs(un - u))
             u = un
             if du < 1e-14 * (1e-3 + np.max(np.abs(u))):
@@ -465,20 +464,34 @@ def _package(pr: _Problem, res, n_out: int) -> RodSolution:
         nb_all.append(nb.T)
     cat = np.concatenate
     return RodSolution(
-        s=cat(s_all), p=cat(p_all), R=cat(R_all), N=cat(N_all), M=cat(M_all), u=cat(u_all),
-        m_backbone=cat(mb_all), n_backbone=cat(nb_all), segment_ends=np.cumsum(pr.L), bvp=res,
+        s=cat(s_all),
+        p=cat(p_all),
+        R=cat(R_all),
+        N=cat(N_all),
+        M=cat(M_all),
+        u=cat(u_all),
+        m_backbone=cat(mb_all),
+        n_backbone=cat(nb_all),
+        segment_ends=np.cumsum(pr.L),
+        bvp=res,
         problem=pr,
     )
 
 
 def solve_segment(
-    length, EI, angles, radius, tensions, weight=(0.0, 0.0, 0.0), tip_force=(0.0, 0.0, 0.0),
-    GJ=None, **kw,
+    length,
+    EI,
+    angles,
+    radius,
+    tensions,
+    weight=(0.0, 0.0, 0.0),
+    tip_force=(0.0, 0.0, 0.0),
+    GJ=None,
+    **kw,
 ) -> RodSolution:
     """One segment: ``len(angles)`` tendons at ``angles`` (rad) on ``radius`` (mm) with
     ``tensions`` (N); see :func:`solve_rod` for the rest."""
-    seg = Segment(float(length), float(EI), tuple(np.atleast_1d(angles)), radius,
-                  tuple(np.atleast_1d(tensions)), GJ)
+    seg = Segment(float(length), float(EI), tuple(np.atleast_1d(angles)), radius, tuple(np.atleast_1d(tensions)), GJ)
     return solve_rod([seg], weight=weight, tip_force=tip_force, **kw)
 
 
@@ -494,9 +507,7 @@ def constant_curvature_tip(length, bend, direction):
     if abs(phi) < 1e-12:
         p = np.array([0.0, 0.0, length])
     else:
-        p = (length / phi) * np.array(
-            [np.cos(d) * (1 - np.cos(phi)), -np.sin(d) * (1 - np.cos(phi)), np.sin(phi)]
-        )
+        p = (length / phi) * np.array([np.cos(d) * (1 - np.cos(phi)), -np.sin(d) * (1 - np.cos(phi)), np.sin(phi)])
 
     def Rz(a):
         return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
@@ -528,6 +539,7 @@ def planar_shooting(lengths, EIs, tendon_moments, weight_xz, tip_force_xz, rtol=
         y = np.array([0.0, 0.0, 0.0, My0])
         s0 = 0.0
         for L, EI, tm in zip(lengths, EIs, tendon_moments):
+
             def f(s, y, EI=EI, tm=tm):
                 th, My = y[2], y[3]
                 Nx = N0x - wx * s
@@ -543,8 +555,15 @@ def planar_shooting(lengths, EIs, tendon_moments, weight_xz, tip_force_xz, rtol=
 
     # secant iteration on the base moment, from the straight rod's value
     m0 = wx * Ltot**2 / 2 + Fx * Ltot
-    res = root_scalar(lambda m: shoot(m)[3], x0=m0, x1=m0 + 1e-3 * (abs(m0) + 1.0),
-                      method="secant", xtol=1e-13, rtol=1e-15, maxiter=100)
+    res = root_scalar(
+        lambda m: shoot(m)[3],
+        x0=m0,
+        x1=m0 + 1e-3 * (abs(m0) + 1.0),
+        method="secant",
+        xtol=1e-13,
+        rtol=1e-15,
+        maxiter=100,
+    )
     if not res.converged:
         raise RuntimeError("planar shooting did not converge")
     My0 = res.root

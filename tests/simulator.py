@@ -17,8 +17,13 @@ import numpy as np
 from scipy.optimize import minimize, root
 from scipy.spatial.transform import Rotation
 
-DECLARED = {"length_mm": 20.0, "pitch_radius_mm": 2.0, "wire_stiffness_N_per_mm": 75.0,
-            "backbone_EI_Nmm2": 1200.0, "preload_N": 2.0}
+DECLARED = {
+    "length_mm": 20.0,
+    "pitch_radius_mm": 2.0,
+    "wire_stiffness_N_per_mm": 75.0,
+    "backbone_EI_Nmm2": 1200.0,
+    "preload_N": 2.0,
+}
 
 
 @dataclasses.dataclass
@@ -146,9 +151,7 @@ def write_set(folder, name: str, truth: Truth, n_samples: int = 240, seed: int =
     rows, header, design = simulate(truth, n_samples, seed)
     folder = Path(folder)
     csv_path, design_path = folder / f"{name}.csv", folder / f"{name}.design.json"
-    lines = [",".join(header)] + [
-        ",".join([str(int(r[0]))] + [f"{x:.6f}" for x in r[1:]]) for r in rows
-    ]
+    lines = [",".join(header)] + [",".join([str(int(r[0]))] + [f"{x:.6f}" for x in r[1:]]) for r in rows]
     csv_path.write_text("\n".join(lines) + "\n")
     design_path.write_text(json.dumps(design))
     return csv_path, design_path
@@ -162,12 +165,28 @@ def write_set(folder, name: str, truth: Truth, n_samples: int = 240, seed: int =
 # is not conservative) by a fixed point of BFGS solves with its force frozen, path-dependent effects as
 # Python loops.
 # =============================================================================================
-ROBOT = {"segments": [
-    {"length_mm": 45.0, "n_wires": 3, "pitch_radius_mm": 3.5, "wire_angles_deg": [10.0, 130.0, 250.0],
-     "backbone_EI_Nmm2": 1500.0, "wire_stiffness_N_per_mm": 30.0, "preload_N": 0.0},
-    {"length_mm": 70.0, "n_wires": 4, "pitch_radius_mm": 5.0, "wire_angles_deg": [45.0, 135.0, 215.0, 315.0],
-     "backbone_EI_Nmm2": 3000.0, "wire_stiffness_N_per_mm": 80.0, "preload_N": 0.0},
-]}
+ROBOT = {
+    "segments": [
+        {
+            "length_mm": 45.0,
+            "n_wires": 3,
+            "pitch_radius_mm": 3.5,
+            "wire_angles_deg": [10.0, 130.0, 250.0],
+            "backbone_EI_Nmm2": 1500.0,
+            "wire_stiffness_N_per_mm": 30.0,
+            "preload_N": 0.0,
+        },
+        {
+            "length_mm": 70.0,
+            "n_wires": 4,
+            "pitch_radius_mm": 5.0,
+            "wire_angles_deg": [45.0, 135.0, 215.0, 315.0],
+            "backbone_EI_Nmm2": 3000.0,
+            "wire_stiffness_N_per_mm": 80.0,
+            "preload_N": 0.0,
+        },
+    ]
+}
 
 
 @dataclasses.dataclass
@@ -223,8 +242,9 @@ def _arc(L, b, s):
         return np.array([0.0, 0.0, s]), rot
     sig = np.arctan2(v, u)
     rho = s / phi
-    return np.array([rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig),
-                     rho * np.sin(phi)]), rot
+    return np.array(
+        [rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig), rho * np.sin(phi)]
+    ), rot
 
 
 _GL = np.polynomial.legendre.leggauss(8)
@@ -237,8 +257,9 @@ def _arc_points(L, b, s):
         return np.stack([0 * s, 0 * s, s], axis=1)
     sig = np.arctan2(b[1], b[0])
     rho = s / phi
-    return np.stack([rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig),
-                     rho * np.sin(phi)], axis=1)
+    return np.stack(
+        [rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig), rho * np.sin(phi)], axis=1
+    )
 
 
 class _Robot:
@@ -254,8 +275,11 @@ class _Robot:
         L_seg = np.array([s["length_mm"] for s in segs]) + per(truth.d_length, "s")
         r_seg = np.array([s["pitch_radius_mm"] for s in segs])
         alpha = np.radians(np.concatenate([s["wire_angles_deg"] for s in segs]))
-        self.alpha = alpha + np.radians(np.asarray(truth.pattern_rotation_deg))[self.owner] \
+        self.alpha = (
+            alpha
+            + np.radians(np.asarray(truth.pattern_rotation_deg))[self.owner]
             + np.radians(per(truth.angle_offsets_deg, "w"))
+        )
         radius = r_seg[self.owner][:, None] + per(truth.d_radius, "s")[None, :]  # (N, S): wire k in segment j
         EI = np.array([s["backbone_EI_Nmm2"] for s in segs]) * np.asarray(truth.EI_factors, float)
         k0 = np.array([s["wire_stiffness_N_per_mm"] for s in segs])[self.owner]
@@ -276,8 +300,8 @@ class _Robot:
         self.A = np.zeros((self.N, 2 * self.S))
         for k in range(self.N):
             for j in range(self.crossed[k]):
-                a = self.alpha[k] + twist[j // m:self.owner[k]].sum()  # turned by the disks' twists on the way
-                self.A[k, 2 * j:2 * j + 2] = -self.radius[k, j] * np.array([np.cos(a), np.sin(a)])
+                a = self.alpha[k] + twist[j // m : self.owner[k]].sum()  # turned by the disks' twists on the way
+                self.A[k, 2 * j : 2 * j + 2] = -self.radius[k, j] * np.array([np.cos(a), np.sin(a)])
         self.loaded = bool(np.any(self.f) or np.any(self.g))
         # hole clearance: wire k's path shortened by C[k, j] |x_j| in every piece j it crosses
         cl = np.asarray(truth.clearance, float)
@@ -289,7 +313,7 @@ class _Robot:
         self.a = np.repeat(np.asarray(truth.compression, float) / m, m) if len(truth.compression) else np.zeros(self.S)
         self.X = np.zeros((self.N, self.S))
         for k in range(self.N):
-            self.X[k, :self.crossed[k]] = 1.0
+            self.X[k, : self.crossed[k]] = 1.0
 
     def compression(self, s0, k=None):
         """The pieces' shortening ``e`` (S,) for the rigid backbone's stretch ``s0``: the minimum over
@@ -356,8 +380,10 @@ class _Robot:
             world = p[:, None, :] + np.einsum("kij,kqj->kqi", R, local)
             M += np.einsum("q,kqi->ki", 0.5 * L * _GL[1], world[:, :-1])
             th = phi
-            kx, ky = np.where(th > 1e-12, -v / np.where(th > 1e-12, th, 1.0), 0.0), np.where(
-                th > 1e-12, u / np.where(th > 1e-12, th, 1.0), 0.0)
+            kx, ky = (
+                np.where(th > 1e-12, -v / np.where(th > 1e-12, th, 1.0), 0.0),
+                np.where(th > 1e-12, u / np.where(th > 1e-12, th, 1.0), 0.0),
+            )
             Kx = np.zeros((K, 3, 3))
             Kx[:, 0, 2], Kx[:, 1, 2], Kx[:, 2, 0], Kx[:, 2, 1] = ky, -kx, -ky, kx
             Rj = np.eye(3) + np.sin(th)[:, None, None] * Kx + (1 - np.cos(th))[:, None, None] * (Kx @ Kx)
@@ -379,7 +405,7 @@ class _Robot:
             h, n = 1e-6, len(x)
             vals = self.load(np.concatenate([x[None], x + h * np.eye(n), x - h * np.eye(n)]))
             V += vals[0]
-            g = g + (vals[1:n + 1] - vals[n + 1:]) / (2 * h)
+            g = g + (vals[1 : n + 1] - vals[n + 1 :]) / (2 * h)
         return V, g
 
     def factors(self, x, direction):
@@ -423,8 +449,13 @@ class _Robot:
                 V, g = self.energy(y, q, t, short)
                 return V + rest @ y, g + rest
 
-            x = minimize(fun, x, jac=True, method="BFGS",
-                         options={"gtol": 1e-8 if nonconservative else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)}).x
+            x = minimize(
+                fun,
+                x,
+                jac=True,
+                method="BFGS",
+                options={"gtol": 1e-8 if nonconservative else 1e-6, "hess_inv0": 0.5 * (Hi + Hi.T)},
+            ).x
             if not nonconservative:
                 break
             if it == 0:
@@ -435,7 +466,7 @@ class _Robot:
                 if np.max(np.abs(self.force(sol.x, q, direction))) < 1e-9:
                     return sol.x
             T = self.factors(x, direction)
-            t = np.array([T[k, :self.crossed[k]].mean() for k in range(self.N)])
+            t = np.array([T[k, : self.crossed[k]].mean() for k in range(self.N)])
             # the rest of the force beyond that energy's gradient, frozen (sum_k tau_k (T_k - t_k) a_k
             # for a rigid backbone)
             rest = self.force(x, q, direction) - self.energy(x, q, t, self.C @ np.hypot(*x.reshape(self.S, 2).T))[1]
@@ -462,9 +493,9 @@ def robot_patterns(design: dict, rng, val: bool = False, servos=None, steps: int
             q[:, k] = -2.0 * t[:, 0]
             out.append((f"rep1_tendon{k}_id{servos[k]}_pull", np.r_[q, q[-1:].repeat(3, 0)]))
     for d in range(0, 360, 60):
-        for j in ([None] if val else range(S)):
+        for j in [None] if val else range(S):
             B = np.zeros((len(t), S, 2))
-            for jj in (range(S) if j is None else [j]):
+            for jj in range(S) if j is None else [j]:
                 a = np.radians(d + 100 * jj)
                 B[:, jj] = 0.45 * t * np.array([np.cos(a), np.sin(a)])
             q = B.reshape(len(t), -1) @ Jq.T + 0.05 * rng.normal(size=(len(t), N))
@@ -479,7 +510,7 @@ def _stick(rob, x, q, direction, prev, h):
     then the bending where that moment is ``h``."""
     taut = rob.stretch(x, q) > 1e-9  # the solve's round-off: a wire at its slack length is slack
     T = rob.factors(x, direction)
-    t = np.array([T[k, :rob.crossed[k]].mean() for k in range(rob.N)])
+    t = np.array([T[k, : rob.crossed[k]].mean() for k in range(rob.N)])
     K = np.diag(np.repeat(rob.EI / rob.L, 2)) + rob.A.T @ ((t * rob.k * taut)[:, None] * rob.A)
     mom = (K @ (prev - x)).reshape(-1, 2)
     size = np.linalg.norm(mom, axis=1)
@@ -499,8 +530,11 @@ def simulate_robot(truth: RobotTruth, patterns, seed: int = 0, hours=None):
     R_reg = Rotation.from_rotvec(np.radians(truth.registration_deg))
     q_eff, last_dir, x = Q[0].copy(), np.zeros(rob.N), np.zeros(2 * rob.S)
     xb = x  # the bending with the bending's friction (its memory)
-    friction_h = np.repeat(np.asarray(truth.bending_friction, float), truth.pieces) \
-        if len(truth.bending_friction) else np.zeros(rob.S)
+    friction_h = (
+        np.repeat(np.asarray(truth.bending_friction, float), truth.pieces)
+        if len(truth.bending_friction)
+        else np.zeros(rob.S)
+    )
     P = np.empty((len(Q), 3))
     for i in range(len(Q)):
         if i > 0:
@@ -547,7 +581,11 @@ def write_robot_set(folder, name: str, truth: RobotTruth, seed: int = 0, val: bo
         return path
 
     train = write(folder / f"{name}_train.csv", robot_patterns(truth.design, rng, servos=servos, steps=steps), 100.0)
-    v = write(folder / f"{name}_val.csv", robot_patterns(truth.design, rng, val=True, steps=steps), 5000.0) if val else None
+    v = (
+        write(folder / f"{name}_val.csv", robot_patterns(truth.design, rng, val=True, steps=steps), 5000.0)
+        if val
+        else None
+    )
     design = folder / f"{name}.design.json"
     design.write_text(json.dumps(truth.design))
     return train, v, design

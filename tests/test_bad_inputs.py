@@ -24,8 +24,12 @@ import pytest
 import tension_zones as tz
 from tension_zones.cli import main
 
-GOOD_SCENARIO = {"n_wires": [3], "theta_L_deg": [30, 80, 50], "delta_deg": [0, 350, 50],
-                 "optimizer": {"starts": 1, "steps": 2}}
+GOOD_SCENARIO = {
+    "n_wires": [3],
+    "theta_L_deg": [30, 80, 50],
+    "delta_deg": [0, 350, 50],
+    "optimizer": {"starts": 1, "steps": 2},
+}
 
 
 def _scaled(lines, columns, factor):
@@ -87,8 +91,11 @@ def _files(tmp):
     (tmp / "d3_nstr.json").write_text(json.dumps({**design, "n_wires": "3"}))
     seg = {"n_wires": 3, "length_mm": 60, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240]}
     (tmp / "route_seg0.json").write_text(json.dumps({"segments": [{**seg, "route_angles_deg": [[0], [1], [2]]}, seg]}))
-    (tmp / "shared_hole.json").write_text(json.dumps({"segments": [
-        seg, {**seg, "wire_angles_deg": [40, 160, 280], "route_angles_deg": [[0], [160], [280]]}]}))
+    (tmp / "shared_hole.json").write_text(
+        json.dumps(
+            {"segments": [seg, {**seg, "wire_angles_deg": [40, 160, 280], "route_angles_deg": [[0], [160], [280]]}]}
+        )
+    )
     rows = tz.example_path("synthetic/nominal_3w.csv").read_text().splitlines()
     (tmp / "cal.csv").write_text("\n".join(rows[:81]) + "\n")
     (tmp / "short.csv").write_text("\n".join(rows[:15]) + "\n")
@@ -118,59 +125,123 @@ CAL = ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3.json"]
 
 CLI = [
     # calibrate: data, design and output checked before the fit
-    ("cal-opencr-without-format", ["calibrate", "{tmp}/opencr.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "looks like an OpenCR recording"),
-    ("cal-design-n-wires-string", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_nstr.json", "--out", "{tmp}/o"],
-     "n_wires must be an integer of at least 3, got '3' (a string)"),
-    ("cal-data-is-folder", ["calibrate", "{tmp}/data_dir", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "is a folder, not a file"),
-    ("cal-truncated-opencr", ["calibrate", "{tmp}/truncated.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json",
-                              "--out", "{tmp}/o"], "is the file truncated?"),
-    ("cal-non-numeric-cell", ["calibrate", "{tmp}/nonnum.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "'abc' is not a number"),
-    ("cal-missing-design", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/nowhere.json", "--out", "{tmp}/o"],
-     "does not exist"),
-    ("cal-missing-data", ["calibrate", "{tmp}/nowhere.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "nowhere.csv"),
+    (
+        "cal-opencr-without-format",
+        ["calibrate", "{tmp}/opencr.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "looks like an OpenCR recording",
+    ),
+    (
+        "cal-design-n-wires-string",
+        ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_nstr.json", "--out", "{tmp}/o"],
+        "n_wires must be an integer of at least 3, got '3' (a string)",
+    ),
+    (
+        "cal-data-is-folder",
+        ["calibrate", "{tmp}/data_dir", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "is a folder, not a file",
+    ),
+    (
+        "cal-truncated-opencr",
+        ["calibrate", "{tmp}/truncated.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json", "--out", "{tmp}/o"],
+        "is the file truncated?",
+    ),
+    (
+        "cal-non-numeric-cell",
+        ["calibrate", "{tmp}/nonnum.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "'abc' is not a number",
+    ),
+    (
+        "cal-missing-design",
+        ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/nowhere.json", "--out", "{tmp}/o"],
+        "does not exist",
+    ),
+    (
+        "cal-missing-data",
+        ["calibrate", "{tmp}/nowhere.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "nowhere.csv",
+    ),
     ("cal-unknown-effect", CAL + ["--effects", "nonsense", "--out", "{tmp}/o"], "unknown effect 'nonsense'"),
     ("cal-unknown-added-effect", CAL + ["--effects", "+nonsense", "--out", "{tmp}/o"], "unknown effect 'nonsense'"),
-    ("cal-effects-list-and-additions", CAL + ["--effects", "drift,+bending_friction", "--out", "{tmp}/o"],
-     "either a list of effects or +NAME additions"),
+    (
+        "cal-effects-list-and-additions",
+        CAL + ["--effects", "drift,+bending_friction", "--out", "{tmp}/o"],
+        "either a list of effects or +NAME additions",
+    ),
     ("cal-holdout-out-of-range", CAL + ["--holdout", "1.5", "--out", "{tmp}/o"], "--holdout must be between 0 and 1"),
     ("cal-negative-workers", CAL + ["--workers", "-1", "--out", "{tmp}/o"], "--workers must be 0 or more, got -1"),
     ("cal-workers-not-a-count", CAL + ["--workers", "two", "--out", "{tmp}/o"], "invalid int value: 'two'"),
     ("cal-unknown-format", CAL + ["--format", "xml", "--out", "{tmp}/o"], "invalid choice: 'xml'"),
-    ("cal-too-few-samples", ["calibrate", "{tmp}/short.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "need at least 10"),
-    ("cal-positions-in-metres", ["calibrate", "{tmp}/cal_metres.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     ("cal_metres.csv: the tip positions span 0.0103 mm (column 'px', their widest) for a robot 20 mm long, less than "
-      "1% of it: are the positions in metres? Millimetres are expected (10.3 mm in millimetres)")),
-    ("cal-positions-in-micrometres", ["calibrate", "{tmp}/cal_um.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     ("cal_um.csv: the tip positions span 1.03e+04 mm (column 'px', their widest) for a robot 20 mm long, but two tips "
-      "of a robot that long are at most 40 mm apart (allowed 80 mm)")),
-    ("cal-tip-never-moves", ["calibrate", "{tmp}/cal_still.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
-     "cal_still.csv: the tip never moves: the tip positions span 0 mm"),
-    ("cal-servo-scaled", ["calibrate", "{tmp}/opencr_x57.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json",
-                          "--out", "{tmp}/o"],
-     ("opencr_x57.csv: column 'servo_4_mm', row 2: wire displacement 39.3466 mm, but wire 1 moves at most 28.3 mm "
-      "(2 x pi x its pitch radii summed over the 1 segment(s) it crosses, 4.5 mm)")),
-    ("cal-validate-is-training", CAL + ["--validate", "{tmp}/cal.csv", "--out", "{tmp}/o"],
-     ("validation file cal.csv: 80 of its 80 rows repeat rows of the training file cal.csv (same commands and tip "
-      "positions; the same recording)")),
+    (
+        "cal-too-few-samples",
+        ["calibrate", "{tmp}/short.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "need at least 10",
+    ),
+    (
+        "cal-positions-in-metres",
+        ["calibrate", "{tmp}/cal_metres.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        (
+            "cal_metres.csv: the tip positions span 0.0103 mm (column 'px', their widest) for a robot 20 mm long, less than "
+            "1% of it: are the positions in metres? Millimetres are expected (10.3 mm in millimetres)"
+        ),
+    ),
+    (
+        "cal-positions-in-micrometres",
+        ["calibrate", "{tmp}/cal_um.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        (
+            "cal_um.csv: the tip positions span 1.03e+04 mm (column 'px', their widest) for a robot 20 mm long, but two tips "
+            "of a robot that long are at most 40 mm apart (allowed 80 mm)"
+        ),
+    ),
+    (
+        "cal-tip-never-moves",
+        ["calibrate", "{tmp}/cal_still.csv", "--design", "{tmp}/d3.json", "--out", "{tmp}/o"],
+        "cal_still.csv: the tip never moves: the tip positions span 0 mm",
+    ),
+    (
+        "cal-servo-scaled",
+        ["calibrate", "{tmp}/opencr_x57.csv", "--format", "opencr", "--design", "{tmp}/ftdcr.json", "--out", "{tmp}/o"],
+        (
+            "opencr_x57.csv: column 'servo_4_mm', row 2: wire displacement 39.3466 mm, but wire 1 moves at most 28.3 mm "
+            "(2 x pi x its pitch radii summed over the 1 segment(s) it crosses, 4.5 mm)"
+        ),
+    ),
+    (
+        "cal-validate-is-training",
+        CAL + ["--validate", "{tmp}/cal.csv", "--out", "{tmp}/o"],
+        (
+            "validation file cal.csv: 80 of its 80 rows repeat rows of the training file cal.csv (same commands and tip "
+            "positions; the same recording)"
+        ),
+    ),
     ("cal-existing-report", CAL + ["--out", "{tmp}/report"], "already holds a report"),
     ("cal-out-is-a-file", CAL + ["--out", "{tmp}/file.txt"], "is a file"),
     # strict JSON in every reader (design, scenario, space)
-    ("json-design-duplicate-key", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_dup.json", "--out", "{tmp}/o"],
-     "d3_dup.json': key 'length_mm' appears twice (JSON keys must be unique)"),
-    ("json-scenario-nan", OPT + ["{tmp}/scen_nan.json", "--out", "{tmp}/o"],
-     "scen_nan.json': key 'joint_uncertainty_mm' is NaN; only finite numbers are allowed"),
-    ("json-scenario-overflow", OPT + ["{tmp}/scen_big.json", "--out", "{tmp}/o"],
-     "key 'length_mm' is 1e400 (too large for a float)"),
-    ("json-space-infinity", ["explore", "--space", "{tmp}/space_inf.json", "--out", "{tmp}/o"],
-     "space_inf.json': key 'pitch_radius_mm[1]' is Infinity"),
+    (
+        "json-design-duplicate-key",
+        ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/d3_dup.json", "--out", "{tmp}/o"],
+        "d3_dup.json': key 'length_mm' appears twice (JSON keys must be unique)",
+    ),
+    (
+        "json-scenario-nan",
+        OPT + ["{tmp}/scen_nan.json", "--out", "{tmp}/o"],
+        "scen_nan.json': key 'joint_uncertainty_mm' is NaN; only finite numbers are allowed",
+    ),
+    (
+        "json-scenario-overflow",
+        OPT + ["{tmp}/scen_big.json", "--out", "{tmp}/o"],
+        "key 'length_mm' is 1e400 (too large for a float)",
+    ),
+    (
+        "json-space-infinity",
+        ["explore", "--space", "{tmp}/space_inf.json", "--out", "{tmp}/o"],
+        "space_inf.json': key 'pitch_radius_mm[1]' is Infinity",
+    ),
     ("json-scenario-deep", OPT + ["{tmp}/scen_deep.json", "--out", "{tmp}/o"], "nests deeper than 32 levels"),
-    ("json-scenario-recursion", OPT + ["{tmp}/scen_deeper.json", "--out", "{tmp}/o"],
-     "scen_deeper.json': nests deeper than 32 levels"),
+    (
+        "json-scenario-recursion",
+        OPT + ["{tmp}/scen_deeper.json", "--out", "{tmp}/o"],
+        "scen_deeper.json': nests deeper than 32 levels",
+    ),
     # usage errors (argparse): one line too
     ("no-command", [], "the following arguments are required: COMMAND"),
     ("unknown-command", ["frobnicate"], "invalid choice: 'frobnicate'"),
@@ -180,55 +251,106 @@ CLI = [
     ("maps-two-wires", ["maps", "--wires", "2", "--out", "{tmp}/m.png"], "n_wires must be at least 3"),
     ("maps-negative-wires", ["maps", "--wires", "-4", "--out", "{tmp}/m.png"], "n_wires must be at least 3"),
     ("maps-too-many-wires", ["maps", "--wires", "100000", "--out", "{tmp}/m.png"], "at most 256"),
-    ("maps-angles-text", ["maps", "--wires", "3", "--angles", "0,x,2", "--out", "{tmp}/m.png"],
-     "--angles must be comma-separated"),
-    ("maps-angles-count", ["maps", "--wires", "3", "--angles", "0,1", "--out", "{tmp}/m.png"],
-     "--angles has 2 values"),
-    ("maps-angles-nan", ["maps", "--wires", "3", "--angles", "0,nan,2", "--out", "{tmp}/m.png"],
-     "--angles must be finite"),
-    ("maps-angles-coincident", ["maps", "--wires", "3", "--angles", "0,360,90", "--out", "{tmp}/m.png"],
-     "coincident wires 1 and 2"),
+    (
+        "maps-angles-text",
+        ["maps", "--wires", "3", "--angles", "0,x,2", "--out", "{tmp}/m.png"],
+        "--angles must be comma-separated",
+    ),
+    ("maps-angles-count", ["maps", "--wires", "3", "--angles", "0,1", "--out", "{tmp}/m.png"], "--angles has 2 values"),
+    (
+        "maps-angles-nan",
+        ["maps", "--wires", "3", "--angles", "0,nan,2", "--out", "{tmp}/m.png"],
+        "--angles must be finite",
+    ),
+    (
+        "maps-angles-coincident",
+        ["maps", "--wires", "3", "--angles", "0,360,90", "--out", "{tmp}/m.png"],
+        "coincident wires 1 and 2",
+    ),
     ("maps-out-suffix", ["maps", "--wires", "3", "--out", "{tmp}/m.jpg"], "must end in .png"),
     ("maps-out-no-parent", ["maps", "--wires", "3", "--out", "{tmp}/nope/m.png"], "does not exist"),
     ("maps-out-parent-is-file", ["maps", "--wires", "3", "--out", "{tmp}/file.txt/m.png"], "is a file"),
     ("maps-out-is-folder", ["maps", "--wires", "3", "--out", "{tmp}/dir.png"], "is a folder"),
     ("maps-out-exists", ["maps", "--wires", "3", "--out", "{tmp}/old.png"], "pass --force"),
     # sweep
-    ("sweep-negative-length", SWEEP[:4] + ["-1", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
-     "length must be positive"),
-    ("sweep-nan-length", SWEEP[:4] + ["nan", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
-     "length must be finite"),
+    (
+        "sweep-negative-length",
+        SWEEP[:4] + ["-1", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+        "length must be positive",
+    ),
+    ("sweep-nan-length", SWEEP[:4] + ["nan", "--pitch-radius", "2", "--out", "{tmp}/s.npz"], "length must be finite"),
     ("sweep-zero-radius", SWEEP[:6] + ["0", "--out", "{tmp}/s.npz"], "pitch_radius must be positive"),
     ("sweep-zero-dq", SWEEP + ["--dq", "0", "--out", "{tmp}/s.npz"], "--dq must be a positive number"),
     ("sweep-nan-dq", SWEEP + ["--dq", "nan", "--out", "{tmp}/s.npz"], "--dq must be a positive number"),
-    ("sweep-negative-step", SWEEP + ["--theta-step", "-5", "--out", "{tmp}/s.npz"],
-     "--theta-step must be a positive number"),
-    ("sweep-zero-delta-step", SWEEP + ["--delta-step", "0", "--out", "{tmp}/s.npz"],
-     "--delta-step must be a positive number"),
-    ("sweep-theta-step-beyond-range", SWEEP + ["--theta-step", "86", "--out", "{tmp}/s.npz"],
-     "--theta-step 86 leaves 1 grid point on 0..85 deg; it must be at most 85"),
-    ("sweep-delta-step-beyond-range", SWEEP + ["--delta-step", "400", "--out", "{tmp}/s.npz"],
-     "--delta-step 400 leaves 1 grid point on 0..360 deg; it must be at most 360"),
-    ("sweep-radius-over-half-length", SWEEP[:6] + ["50", "--out", "{tmp}/s.npz"],
-     ("--pitch-radius: pitch_radius 50 mm is more than half the length 20 mm: a wire that far out meets the "
-      "centre of curvature before the segment bends 2 rad")),
-    ("sweep-absurd-length", SWEEP[:4] + ["1e308", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
-     "--length: length must be at most 1e+06 mm (a kilometre), got 1e+308"),
-    ("sweep-grid-too-fine", SWEEP + ["--theta-step", "1e-6", "--out", "{tmp}/s.npz"],
-     "sweeps at most 20,000,000"),
-    ("sweep-too-many-wires", ["sweep", "--wires", "4096", "--length", "20", "--pitch-radius", "2",
-                              "--out", "{tmp}/s.npz"], "--wires must be at most 256"),
-    ("sweep-compliance-missing", SWEEP + ["--compliance", "--out", "{tmp}/s.npz"],
-     "--compliance needs --wire-stiffness, --backbone-EI, --load"),
+    (
+        "sweep-negative-step",
+        SWEEP + ["--theta-step", "-5", "--out", "{tmp}/s.npz"],
+        "--theta-step must be a positive number",
+    ),
+    (
+        "sweep-zero-delta-step",
+        SWEEP + ["--delta-step", "0", "--out", "{tmp}/s.npz"],
+        "--delta-step must be a positive number",
+    ),
+    (
+        "sweep-theta-step-beyond-range",
+        SWEEP + ["--theta-step", "86", "--out", "{tmp}/s.npz"],
+        "--theta-step 86 leaves 1 grid point on 0..85 deg; it must be at most 85",
+    ),
+    (
+        "sweep-delta-step-beyond-range",
+        SWEEP + ["--delta-step", "400", "--out", "{tmp}/s.npz"],
+        "--delta-step 400 leaves 1 grid point on 0..360 deg; it must be at most 360",
+    ),
+    (
+        "sweep-radius-over-half-length",
+        SWEEP[:6] + ["50", "--out", "{tmp}/s.npz"],
+        (
+            "--pitch-radius: pitch_radius 50 mm is more than half the length 20 mm: a wire that far out meets the "
+            "centre of curvature before the segment bends 2 rad"
+        ),
+    ),
+    (
+        "sweep-absurd-length",
+        SWEEP[:4] + ["1e308", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+        "--length: length must be at most 1e+06 mm (a kilometre), got 1e+308",
+    ),
+    ("sweep-grid-too-fine", SWEEP + ["--theta-step", "1e-6", "--out", "{tmp}/s.npz"], "sweeps at most 20,000,000"),
+    (
+        "sweep-too-many-wires",
+        ["sweep", "--wires", "4096", "--length", "20", "--pitch-radius", "2", "--out", "{tmp}/s.npz"],
+        "--wires must be at most 256",
+    ),
+    (
+        "sweep-compliance-missing",
+        SWEEP + ["--compliance", "--out", "{tmp}/s.npz"],
+        "--compliance needs --wire-stiffness, --backbone-EI, --load",
+    ),
     ("sweep-load-alone", SWEEP + ["--load", "1,2,3", "--out", "{tmp}/s.npz"], "go with --compliance"),
     ("sweep-load-text", COMPLIANCE[:-1] + ["1,x,3", "--out", "{tmp}/s.npz"], "--load must be"),
     ("sweep-load-short", COMPLIANCE[:-1] + ["1,2", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),
     ("sweep-load-inf", COMPLIANCE[:-1] + ["inf,0,0", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),
-    ("sweep-negative-stiffness", SWEEP + ["--compliance", "--wire-stiffness", "-75", "--backbone-EI",
-                                          "1200", "--load", "5,0,0", "--out", "{tmp}/s.npz"],
-     "--wire-stiffness: wire_stiffness must be positive"),
-    ("sweep-negative-preload", COMPLIANCE + ["--preload", "-1", "--out", "{tmp}/s.npz"],
-     "--preload: preload must be non-negative"),
+    (
+        "sweep-negative-stiffness",
+        SWEEP
+        + [
+            "--compliance",
+            "--wire-stiffness",
+            "-75",
+            "--backbone-EI",
+            "1200",
+            "--load",
+            "5,0,0",
+            "--out",
+            "{tmp}/s.npz",
+        ],
+        "--wire-stiffness: wire_stiffness must be positive",
+    ),
+    (
+        "sweep-negative-preload",
+        COMPLIANCE + ["--preload", "-1", "--out", "{tmp}/s.npz"],
+        "--preload: preload must be non-negative",
+    ),
     ("sweep-out-suffix", SWEEP + ["--out", "{tmp}/s.csv"], "must end in .npz"),
     ("sweep-out-is-folder", SWEEP + ["--out", "{tmp}/dir.npz"], "is a folder"),
     ("sweep-out-exists", SWEEP + ["--out", "{tmp}/old.npz"], "pass --force"),
@@ -242,8 +364,11 @@ CLI = [
     ("opt-unknown-key", OPT + ["{tmp}/unknown.json", "--out", "{tmp}/o"], "unknown scenario key"),
     ("opt-n-wires-string", OPT + ["{tmp}/n_str.json", "--out", "{tmp}/o"], "'n_wires'"),
     ("opt-n-wires-two", OPT + ["{tmp}/n_two.json", "--out", "{tmp}/o"], "integers from 3 to 16"),
-    ("opt-strict-string", OPT + ["{tmp}/strict_str.json", "--out", "{tmp}/o"],
-     "'strict_controllability': must be true or false"),
+    (
+        "opt-strict-string",
+        OPT + ["{tmp}/strict_str.json", "--out", "{tmp}/o"],
+        "'strict_controllability': must be true or false",
+    ),
     ("opt-radius-order", OPT + ["{tmp}/radius_order.json", "--out", "{tmp}/o"], "is larger than max"),
     ("opt-theta-range", OPT + ["{tmp}/theta_range.json", "--out", "{tmp}/o"], "must lie within"),
     ("opt-nan-dq", OPT + ["{tmp}/nan_dq.json", "--out", "{tmp}/o"], "'joint_uncertainty_mm'"),
@@ -251,22 +376,39 @@ CLI = [
     ("opt-starts-zero", OPT + ["{tmp}/starts_zero.json", "--out", "{tmp}/o"], "'optimizer.starts'"),
     ("opt-load-short", OPT + ["{tmp}/load_short.json", "--out", "{tmp}/o"], "'load_N'"),
     ("opt-arc-needs-free", OPT + ["{tmp}/arc_fixed.json", "--out", "{tmp}/o"], "needs free_wire_angles"),
-    ("opt-seed-negative", OPT + ["{tmp}/seed_negative.json", "--out", "{tmp}/o"],
-     "scenario key 'optimizer.seed': must be a non-negative integer, got -1"),
-    ("cal-route-on-segment-0", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/route_seg0.json", "--out", "{tmp}/o"],
-     ("route_seg0.json': segment 0: route_angles_deg has no place on the first segment (it gives a wire's path "
-      "through the segments before its own, and none lies before segment 0)")),
-    ("opt-radius-over-half-length", OPT + ["{tmp}/radius_half.json", "--out", "{tmp}/o"],
-     "scenario key 'pitch_radius_mm': max 50 mm is more than half the length_mm 20 mm"),
-    ("opt-step-beyond-range", OPT + ["{tmp}/step_beyond.json", "--out", "{tmp}/o"],
-     "scenario key 'theta_L_deg': step 100 is larger than the range 5..85: the grid would be 5 alone"),
-    ("cal-routing-shares-a-hole", ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/shared_hole.json", "--out",
-                                   "{tmp}/o"],
-     ("shared_hole.json': segment 1: its routing runs wire 1 of segment 1 through segment 0 in the hole of wire 1 "
-      "of segment 0 (0 deg, radius 4.5 mm); each wire needs its own hole")),
+    (
+        "opt-seed-negative",
+        OPT + ["{tmp}/seed_negative.json", "--out", "{tmp}/o"],
+        "scenario key 'optimizer.seed': must be a non-negative integer, got -1",
+    ),
+    (
+        "cal-route-on-segment-0",
+        ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/route_seg0.json", "--out", "{tmp}/o"],
+        (
+            "route_seg0.json': segment 0: route_angles_deg has no place on the first segment (it gives a wire's path "
+            "through the segments before its own, and none lies before segment 0)"
+        ),
+    ),
+    (
+        "opt-radius-over-half-length",
+        OPT + ["{tmp}/radius_half.json", "--out", "{tmp}/o"],
+        "scenario key 'pitch_radius_mm': max 50 mm is more than half the length_mm 20 mm",
+    ),
+    (
+        "opt-step-beyond-range",
+        OPT + ["{tmp}/step_beyond.json", "--out", "{tmp}/o"],
+        "scenario key 'theta_L_deg': step 100 is larger than the range 5..85: the grid would be 5 alone",
+    ),
+    (
+        "cal-routing-shares-a-hole",
+        ["calibrate", "{tmp}/cal.csv", "--design", "{tmp}/shared_hole.json", "--out", "{tmp}/o"],
+        (
+            "shared_hole.json': segment 1: its routing runs wire 1 of segment 1 through segment 0 in the hole of wire 1 "
+            "of segment 0 (0 deg, radius 4.5 mm); each wire needs its own hole"
+        ),
+    ),
     ("opt-out-is-file", OPT + ["{tmp}/good.json", "--out", "{tmp}/file.txt"], "must be a folder"),
-    ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"],
-     "already holds 'result.json'"),
+    ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"], "already holds 'result.json'"),
     ("opt-out-no-parent", OPT + ["{tmp}/good.json", "--out", "{tmp}/nope/o"], "does not exist"),
     # reproduce
     ("reproduce-out-is-file", ["reproduce", "--out", "{tmp}/file.txt"], "must be a folder"),
@@ -304,12 +446,19 @@ def test_the_table_is_large_and_names_are_unique():
     assert len(CLI) >= 40 and len({c[0] for c in CLI}) == len(CLI)
 
 
-@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0,
-                    reason="root may write in a read-only folder (see the probe test below)")
-@pytest.mark.parametrize("argv", [["maps", "--wires", "3", "--out", "{tmp}/ro/m.png"],
-                                  SWEEP + ["--out", "{tmp}/ro/s.npz"],
-                                  OPT + ["{tmp}/good.json", "--out", "{tmp}/ro/o"],
-                                  ["reproduce", "--out", "{tmp}/ro"]])
+@pytest.mark.skipif(
+    hasattr(os, "geteuid") and os.geteuid() == 0,
+    reason="root may write in a read-only folder (see the probe test below)",
+)
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["maps", "--wires", "3", "--out", "{tmp}/ro/m.png"],
+        SWEEP + ["--out", "{tmp}/ro/s.npz"],
+        OPT + ["{tmp}/good.json", "--out", "{tmp}/ro/o"],
+        ["reproduce", "--out", "{tmp}/ro"],
+    ],
+)
 def test_read_only_folder(tmp_path, capsys, argv):
     ro = tmp_path / "ro"
     ro.mkdir()
@@ -322,10 +471,15 @@ def test_read_only_folder(tmp_path, capsys, argv):
     assert after == before
 
 
-@pytest.mark.parametrize("argv", [["maps", "--wires", "3", "--out", "{tmp}/m.png"],
-                                  SWEEP + ["--out", "{tmp}/s.npz"],
-                                  OPT + ["{tmp}/good.json", "--out", "{tmp}/o"],
-                                  ["reproduce", "--out", "{tmp}/r"]])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["maps", "--wires", "3", "--out", "{tmp}/m.png"],
+        SWEEP + ["--out", "{tmp}/s.npz"],
+        OPT + ["{tmp}/good.json", "--out", "{tmp}/o"],
+        ["reproduce", "--out", "{tmp}/r"],
+    ],
+)
 def test_an_unwritable_folder_is_found_before_any_work(tmp_path, capsys, monkeypatch, argv):
     """The write probe fails as on a read-only file system (also as root): one line, before any
     computation (the commands' work functions must not be reached)."""
@@ -338,8 +492,12 @@ def test_an_unwritable_folder_is_found_before_any_work(tmp_path, capsys, monkeyp
     def work(*a, **k):
         raise AssertionError("the computation started before --out was checked")
 
-    for module, name in (("analysis._sweep", "sweep_grid"), ("design._optimise", "optimize"),
-                         ("paper._reproduce", "reproduce"), ("model._zones", "tension_map")):
+    for module, name in (
+        ("analysis._sweep", "sweep_grid"),
+        ("design._optimise", "optimize"),
+        ("paper._reproduce", "reproduce"),
+        ("model._zones", "tension_map"),
+    ):
         monkeypatch.setattr(importlib.import_module(f"tension_zones.{module}"), name, work)
     monkeypatch.setattr(tempfile, "mkstemp", refuse)
     rc, _out, err, before, after = _run_cli(tmp_path, capsys, argv)
@@ -359,9 +517,26 @@ def test_force_overwrites_and_writes_atomically(tmp_path, capsys):
 def test_console_script_prints_one_line_without_traceback(tmp_path):
     _files(tmp_path)
     before = _snapshot(tmp_path)
-    r = subprocess.run([sys.executable, "-m", "tension_zones.cli", "sweep", "--wires", "3", "--length",
-                        "20", "--pitch-radius", "2", "--out", str(tmp_path / "old.npz")],
-                       capture_output=True, text=True, timeout=300, check=False)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tension_zones.cli",
+            "sweep",
+            "--wires",
+            "3",
+            "--length",
+            "20",
+            "--pitch-radius",
+            "2",
+            "--out",
+            str(tmp_path / "old.npz"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "pass --force" in r.stderr
     assert "Traceback" not in r.stderr and _snapshot(tmp_path) == before
 
@@ -421,56 +596,119 @@ API = [
     ("sweep-2d-axis", _sweep(th=np.zeros((2, 2))), "1-D grids"),
     ("sweep-not-design", _sweep(design={"n_wires": 3}), "must be a tension_zones.Design"),
     ("sweep-not-dict", _sweep(fn=lambda design, t, e: t), "must return a dict"),
-    ("measures-mask-shape", lambda: tz.pose_measures(tz.Design(4, 20.0, 2.0), 0.5, 0.1, 0.4, np.ones(3)),
-     "mask must have shape (4,)"),
-    ("wrench-shape", lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, np.ones(4)),
-     "3 (force) or 6 (force, moment) components"),
-    ("wrench-nan", lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, [np.nan, 0, 0]),
-     "a wrench must be finite"),
-    ("compliance-grid-theta", lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), theta_L_deg=[100.0]),
-     "theta_L_deg must lie in (-90, 90]"),
-    ("compliance-grid-empty", lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), delta_deg=[]),
-     "non-empty 1-D array"),
-    ("tension-map-psi-dot", lambda: tz.tension_map(tz.Design(3, 20.0, 2.0), psi_dot=[-1.0, 0.0]),
-     "needs theta_L"),
-    ("tension-score-psi-dot", lambda: tz.tension_score(tz.Design(3, 20.0, 2.0), 0.1, psi_dot=[1.0, 0.0]),
-     "needs theta_L"),
-    ("calibrate-workers", lambda: tz.calibrate(tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3),
-                                               tz.Design(3, 20.0, 2.0), workers=-1),
-     "workers must be a whole number, 0 or more, got -1"),
-    ("design-radius-over-half-length", lambda: tz.Design(3, 20.0, 50.0),
-     "pitch_radius 50 mm is more than half the length 20 mm"),
+    (
+        "measures-mask-shape",
+        lambda: tz.pose_measures(tz.Design(4, 20.0, 2.0), 0.5, 0.1, 0.4, np.ones(3)),
+        "mask must have shape (4,)",
+    ),
+    (
+        "wrench-shape",
+        lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, np.ones(4)),
+        "3 (force) or 6 (force, moment) components",
+    ),
+    (
+        "wrench-nan",
+        lambda: tz.compliance_pose(tz.Design(3, 20.0, 2.0), 0.5, 0.1, [np.nan, 0, 0]),
+        "a wrench must be finite",
+    ),
+    (
+        "compliance-grid-theta",
+        lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), theta_L_deg=[100.0]),
+        "theta_L_deg must lie in (-90, 90]",
+    ),
+    ("compliance-grid-empty", lambda: tz.compliance_grid(tz.Design(3, 20.0, 2.0), delta_deg=[]), "non-empty 1-D array"),
+    ("tension-map-psi-dot", lambda: tz.tension_map(tz.Design(3, 20.0, 2.0), psi_dot=[-1.0, 0.0]), "needs theta_L"),
+    (
+        "tension-score-psi-dot",
+        lambda: tz.tension_score(tz.Design(3, 20.0, 2.0), 0.1, psi_dot=[1.0, 0.0]),
+        "needs theta_L",
+    ),
+    (
+        "calibrate-workers",
+        lambda: tz.calibrate(
+            tz.load_data(tz.example_path("synthetic/nominal_3w.csv"), n_wires=3), tz.Design(3, 20.0, 2.0), workers=-1
+        ),
+        "workers must be a whole number, 0 or more, got -1",
+    ),
+    (
+        "design-radius-over-half-length",
+        lambda: tz.Design(3, 20.0, 50.0),
+        "pitch_radius 50 mm is more than half the length 20 mm",
+    ),
     ("design-absurd-length", lambda: tz.Design(3, 1e308, 2.0), "length must be at most 1e+06 mm (a kilometre)"),
-    ("file-radius-over-half-length", _from_dict(pitch_radius_mm=50),
-     "pitch_radius_mm 50 mm is more than half the length_mm 20 mm"),
-    ("space-radius-over-half-length", lambda: tz.parse_space({"length_mm": [20, 40], "pitch_radius_mm": [1, 15]}),
-     "space key 'pitch_radius_mm': max 15 mm is more than half the min length_mm 20 mm"),
-    ("space-halton-too-many", lambda: tz.parse_space({"length_mm": [15, 25], "sample": {"method": "halton",
-                                                                                         "designs": 10**9}}),
-     "space key 'sample.designs': 1e+09 designs for 3 wires, more than 1e+07: fewer designs"),
-    ("space-grid-too-many", lambda: tz.parse_space({"length_mm": [15, 25], "pitch_radius_mm": [1, 3],
-                                                    "preload_N": [0, 5], "sample": {"points": 4000}}),
-     "the grid has 6.4e+10 designs for 3 wires, more than 1e+07: fewer points, or method \"halton\""),
-    ("robot-routing-shares-a-hole", lambda: tz.Robot.from_dict({"segments": [
-        {"n_wires": 3, "length_mm": 40, "pitch_radius_mm": 3},
-        {"n_wires": 3, "length_mm": 30, "pitch_radius_mm": 3, "wire_angles_deg": [60, 180, 300],
-         "route_angles_deg": [[60], [120], [300]]}]}),
-     ("segment 1: its routing runs wire 2 of segment 1 through segment 0 in the hole of wire 2 of segment 0 "
-      "(120 deg, radius 3 mm)")),
-    ("metrics-theta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 60.0, 1.0, 0.4),
-     "theta_L = 60 is beyond +-pi: radians are expected (np.radians(60) = 1.0472)"),
-    ("metrics-delta-in-degrees", lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 1.0, 66.0, 0.4),
-     "delta = 66 is beyond +-2 pi: radians are expected (np.radians(66) = 1.15192)"),
-    ("measures-negative-dq", lambda: tz.pose_measures(tz.Design(3, 20.0, 2.0), 1.0, 0.5, -0.4),
-     "dq must be non-negative (a bound on each joint's error, mm), got -0.4"),
-    ("calibrate-tip-never-moves", lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
-     "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long"),
-    ("calibrate-validate-overlaps", lambda: tz.calibrate(_nominal(), tz.Design(3, 20.0, 2.0),
-                                                         validate=_nominal(rows=slice(20, 40))),
-     "20 of its 20 rows repeat rows of the training file nominal_3w.csv"),
-    ("over-grid-mismatch", lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2),
-                                                                   np.zeros(2), 0.4, np.ones(3)),
-     "mask must have shape"),
+    (
+        "file-radius-over-half-length",
+        _from_dict(pitch_radius_mm=50),
+        "pitch_radius_mm 50 mm is more than half the length_mm 20 mm",
+    ),
+    (
+        "space-radius-over-half-length",
+        lambda: tz.parse_space({"length_mm": [20, 40], "pitch_radius_mm": [1, 15]}),
+        "space key 'pitch_radius_mm': max 15 mm is more than half the min length_mm 20 mm",
+    ),
+    (
+        "space-halton-too-many",
+        lambda: tz.parse_space({"length_mm": [15, 25], "sample": {"method": "halton", "designs": 10**9}}),
+        "space key 'sample.designs': 1e+09 designs for 3 wires, more than 1e+07: fewer designs",
+    ),
+    (
+        "space-grid-too-many",
+        lambda: tz.parse_space(
+            {"length_mm": [15, 25], "pitch_radius_mm": [1, 3], "preload_N": [0, 5], "sample": {"points": 4000}}
+        ),
+        'the grid has 6.4e+10 designs for 3 wires, more than 1e+07: fewer points, or method "halton"',
+    ),
+    (
+        "robot-routing-shares-a-hole",
+        lambda: tz.Robot.from_dict(
+            {
+                "segments": [
+                    {"n_wires": 3, "length_mm": 40, "pitch_radius_mm": 3},
+                    {
+                        "n_wires": 3,
+                        "length_mm": 30,
+                        "pitch_radius_mm": 3,
+                        "wire_angles_deg": [60, 180, 300],
+                        "route_angles_deg": [[60], [120], [300]],
+                    },
+                ]
+            }
+        ),
+        (
+            "segment 1: its routing runs wire 2 of segment 1 through segment 0 in the hole of wire 2 of segment 0 "
+            "(120 deg, radius 3 mm)"
+        ),
+    ),
+    (
+        "metrics-theta-in-degrees",
+        lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 60.0, 1.0, 0.4),
+        "theta_L = 60 is beyond +-pi: radians are expected (np.radians(60) = 1.0472)",
+    ),
+    (
+        "metrics-delta-in-degrees",
+        lambda: tz.pose_metrics(tz.Design(3, 20.0, 2.0), 1.0, 66.0, 0.4),
+        "delta = 66 is beyond +-2 pi: radians are expected (np.radians(66) = 1.15192)",
+    ),
+    (
+        "measures-negative-dq",
+        lambda: tz.pose_measures(tz.Design(3, 20.0, 2.0), 1.0, 0.5, -0.4),
+        "dq must be non-negative (a bound on each joint's error, mm), got -0.4",
+    ),
+    (
+        "calibrate-tip-never-moves",
+        lambda: tz.calibrate(_nominal(p=np.zeros((40, 3))), tz.Design(3, 20.0, 2.0)),
+        "the tip never moves: the tip positions span 0 mm (column 'px', their widest) for a robot 20 mm long",
+    ),
+    (
+        "calibrate-validate-overlaps",
+        lambda: tz.calibrate(_nominal(), tz.Design(3, 20.0, 2.0), validate=_nominal(rows=slice(20, 40))),
+        "20 of its 20 rows repeat rows of the training file nominal_3w.csv",
+    ),
+    (
+        "over-grid-mismatch",
+        lambda: tz.over_grid(tz.pose_measures)(tz.Design(4, 20.0, 2.0), np.zeros(2), np.zeros(2), 0.4, np.ones(3)),
+        "mask must have shape",
+    ),
 ]
 
 
@@ -489,10 +727,15 @@ def test_the_api_table_is_large():
 # ------------------------------------------------------------------------------------------------
 # The plausibility checks pass every shipped recording
 # ------------------------------------------------------------------------------------------------
-RECORDINGS = [(tz.example_path(f"synthetic/{n}.csv"), tz.example_path(f"synthetic/{n}.design.json"), "model")
-              for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")]
-RECORDINGS += [(tz.example_path(f"ftdcr_v{v}/{n}.csv"), tz.example_path(f"ftdcr_v{v}/design.json"), "opencr")
-               for v in (4, 6) for n in ("train", "tendon_pull")]
+RECORDINGS = [
+    (tz.example_path(f"synthetic/{n}.csv"), tz.example_path(f"synthetic/{n}.design.json"), "model")
+    for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")
+]
+RECORDINGS += [
+    (tz.example_path(f"ftdcr_v{v}/{n}.csv"), tz.example_path(f"ftdcr_v{v}/design.json"), "opencr")
+    for v in (4, 6)
+    for n in ("train", "tendon_pull")
+]
 
 
 @pytest.mark.parametrize("data, design, fmt", RECORDINGS, ids=lambda x: str(x).split("examples/")[-1])
@@ -545,7 +788,9 @@ def test_the_command_line_shows_a_warning_as_one_line(tmp_path, capsys, monkeypa
 
     from tension_zones import cli
 
-    monkeypatch.setattr(cli, "cmd_maps", lambda args: warnings.warn("first line\nsecond line", UserWarning, stacklevel=1))
+    monkeypatch.setattr(
+        cli, "cmd_maps", lambda args: warnings.warn("first line\nsecond line", UserWarning, stacklevel=1)
+    )
     assert main(["maps", "--wires", "3", "--out", str(tmp_path / "m.png")]) == 0
     err = capsys.readouterr().err
     assert err == "tension-zones: warning: first line second line\n", err

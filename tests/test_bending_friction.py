@@ -80,9 +80,20 @@ def test_a_large_friction_keeps_the_shape_until_the_recording_restarts():
     np.testing.assert_allclose(out[3:], np.repeat(X[3:4], 3, 0), atol=1e-12)
 
 
-TWO = tz.Robot([tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=0.0),
-                tz.Design(4, 50.0, 2.5, wire_angles=np.radians([10, 100, 190, 280]), backbone_EI=1500.0,
-                          wire_stiffness=60.0, preload=0.0)])
+TWO = tz.Robot(
+    [
+        tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=0.0),
+        tz.Design(
+            4,
+            50.0,
+            2.5,
+            wire_angles=np.radians([10, 100, 190, 280]),
+            backbone_EI=1500.0,
+            wire_stiffness=60.0,
+            preload=0.0,
+        ),
+    ]
+)
 
 
 def _pulls(n_wires, steps=6):
@@ -126,8 +137,7 @@ def test_the_memory_models_jacobian_matches_central_differences():
     that starts or stops sticking) the residuals are smooth and the Jacobian exact."""
     q = _pulls(TWO.n_wires)
     rng = np.random.default_rng(2)
-    data = Dataset(sample=np.arange(len(q)), q=q, f=np.zeros((len(q), 3)), p=rng.normal(size=(len(q), 3)),
-                   frame="base")
+    data = Dataset(sample=np.arange(len(q)), q=q, f=np.zeros((len(q), 3)), p=rng.normal(size=(len(q), 3)), frame="base")
     pb = Problem(RobotModel.of(TWO), TWO, data, nominal("base") + library("base", ["bending_friction"]))
     sl = pb.spec.slices()
     active = ["backbone_EI", "bending_friction", "preload"]
@@ -136,8 +146,11 @@ def test_the_memory_models_jacobian_matches_central_differences():
     theta[sl["backbone_EI"]] = [0.1, -0.2]
     theta[sl["preload"]] = rng.uniform(0.0, 1.0, TWO.n_wires)
     _, J = pb.jacobian(theta, active)
-    cols = [*range(sl["backbone_EI"].start, sl["backbone_EI"].stop),
-            *range(sl["bending_friction"].start, sl["bending_friction"].stop), sl["preload"].start + 2]
+    cols = [
+        *range(sl["backbone_EI"].start, sl["backbone_EI"].stop),
+        *range(sl["bending_friction"].start, sl["bending_friction"].stop),
+        sl["preload"].start + 2,
+    ]
     for col in cols:
         e = np.zeros_like(theta)
         e[col] = 1e-6

@@ -54,15 +54,18 @@ def write_tmp(lines):
     return p
 
 
-@pytest.mark.parametrize("mutate, needle", [
-    (lambda L: edit(L, 7, "px", "nan"), "column 'px', row 7"),
-    (lambda L: edit(L, 12, "q2", "inf"), "column 'q2', row 12"),
-    (lambda L: edit(L, 5, "fz", "abc"), "column 'fz', row 5"),
-    (lambda L: edit(L, 9, "sample", "7"), "column 'sample', row 9"),
-    (lambda L: edit(L, 3, "q1", "25.0"), "column 'q1', row 3"),
-    (lambda L: edit(L, 4, "rx", "4.0"), "column 'rx', row 4"),
-    (lambda L: edit(L, 6, "fx", "1e5"), "column 'fx', row 6"),
-])
+@pytest.mark.parametrize(
+    "mutate, needle",
+    [
+        (lambda L: edit(L, 7, "px", "nan"), "column 'px', row 7"),
+        (lambda L: edit(L, 12, "q2", "inf"), "column 'q2', row 12"),
+        (lambda L: edit(L, 5, "fz", "abc"), "column 'fz', row 5"),
+        (lambda L: edit(L, 9, "sample", "7"), "column 'sample', row 9"),
+        (lambda L: edit(L, 3, "q1", "25.0"), "column 'q1', row 3"),
+        (lambda L: edit(L, 4, "rx", "4.0"), "column 'rx', row 4"),
+        (lambda L: edit(L, 6, "fx", "1e5"), "column 'fx', row 6"),
+    ],
+)
 def test_bad_values_name_column_and_row(good, mutate, needle):
     lines, _ = good
     with pytest.raises(DataError, match=needle.replace("(", r"\(")) as e:
@@ -114,11 +117,9 @@ def test_cli_errors_are_one_line(good, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "column 'px', row 7" in err and err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "o").exists()
-    assert main(["calibrate", str(tmp_path / "nope.csv"), "--design", str(dj), "--out",
-                 str(tmp_path / "o")]) == 2
+    assert main(["calibrate", str(tmp_path / "nope.csv"), "--design", str(dj), "--out", str(tmp_path / "o")]) == 2
     assert "does not exist" in capsys.readouterr().err
-    assert main(["calibrate", str(bad), "--design", str(dj), "--out", str(tmp_path / "o"),
-                 "--holdout", "1.5"]) == 2
+    assert main(["calibrate", str(bad), "--design", str(dj), "--out", str(tmp_path / "o"), "--holdout", "1.5"]) == 2
     assert capsys.readouterr().err.count("\n") == 1
 
 
@@ -139,16 +140,19 @@ def test_split_in_acquisition_order(good):
         ds.split(0.0)
 
 
-@pytest.mark.parametrize("edit_text, needle", [
-    (lambda s: "\ufeff" + s, None),  # a byte-order mark is handled
-    (lambda s: s.replace(",", ";"), None),  # so is a semicolon-separated file
-    (lambda s: s.replace(",", "\t"), None),  # and a tab-separated one
-    (lambda s: s.replace(",", ";").replace(".", ","), "decimal comma"),
-    (lambda s: s.replace("fx", "force_x", 1), "missing column 'fx'"),
-    (lambda s: "sample q1 q2\n1 2 3\n", "single column"),
-    (lambda s: "", "empty"),
-    (lambda s: s.split("\n")[0] + "\n", "no data rows"),
-])
+@pytest.mark.parametrize(
+    "edit_text, needle",
+    [
+        (lambda s: "\ufeff" + s, None),  # a byte-order mark is handled
+        (lambda s: s.replace(",", ";"), None),  # so is a semicolon-separated file
+        (lambda s: s.replace(",", "\t"), None),  # and a tab-separated one
+        (lambda s: s.replace(",", ";").replace(".", ","), "decimal comma"),
+        (lambda s: s.replace("fx", "force_x", 1), "missing column 'fx'"),
+        (lambda s: "sample q1 q2\n1 2 3\n", "single column"),
+        (lambda s: "", "empty"),
+        (lambda s: s.split("\n")[0] + "\n", "no data rows"),
+    ],
+)
 def test_formats_handled_or_named(good, edit_text, needle):
     lines, _ = good
     p = write_tmp(["x"])
@@ -217,19 +221,30 @@ def test_opencr_mapping_sign_order_and_groups(tmp_path):
     np.testing.assert_allclose(d2.q[:, 0], d.q[:, 1])
 
 
-@pytest.mark.parametrize("rows, header, kw, message", [
-    (ROWS, HEADER.replace("tip_y", "tip_q"), {}, "missing column 'tip_y'"),
-    ([ROWS[0], ROWS[1].replace("3.0,2.0", "nan,2.0")], HEADER, {"servo_ids": [2, 1, 3]},
-     "column 'tip_x', row 2: value nan is not finite"),
-    ([ROWS[0], ROWS[1].replace("1.0,-2.0", "x,-2.0")], HEADER, {"servo_ids": [2, 1, 3]},
-     "column 'servo_2_mm', row 2: 'x' is not a number"),
-    (ROWS[:2], HEADER, {}, "no pattern label 'tendon1_id<servo>' says which servo drives tendon 1"),
-    (ROWS, HEADER, {"n_wires": 6}, "3 servo columns but the design has 6 wires"),
-    (ROWS, HEADER, {"servo_ids": [2, 1, 4]}, "missing column 'servo_4_mm'"),
-    ([ROWS[1], ROWS[0]], HEADER, {"servo_ids": [2, 1, 3]}, "column 'timestamp', row 2"),
-    (ROWS + ["3.0,rep1_tendon0_id1_pull,0,0,0,0,0,188"], HEADER, {}, "tendon 0 is driven by servo 1"),
-    ([ROWS[0] + ",7"] + ROWS[1:], HEADER, {}, "row 1: the row has 9 fields, the header 8"),
-])
+@pytest.mark.parametrize(
+    "rows, header, kw, message",
+    [
+        (ROWS, HEADER.replace("tip_y", "tip_q"), {}, "missing column 'tip_y'"),
+        (
+            [ROWS[0], ROWS[1].replace("3.0,2.0", "nan,2.0")],
+            HEADER,
+            {"servo_ids": [2, 1, 3]},
+            "column 'tip_x', row 2: value nan is not finite",
+        ),
+        (
+            [ROWS[0], ROWS[1].replace("1.0,-2.0", "x,-2.0")],
+            HEADER,
+            {"servo_ids": [2, 1, 3]},
+            "column 'servo_2_mm', row 2: 'x' is not a number",
+        ),
+        (ROWS[:2], HEADER, {}, "no pattern label 'tendon1_id<servo>' says which servo drives tendon 1"),
+        (ROWS, HEADER, {"n_wires": 6}, "3 servo columns but the design has 6 wires"),
+        (ROWS, HEADER, {"servo_ids": [2, 1, 4]}, "missing column 'servo_4_mm'"),
+        ([ROWS[1], ROWS[0]], HEADER, {"servo_ids": [2, 1, 3]}, "column 'timestamp', row 2"),
+        (ROWS + ["3.0,rep1_tendon0_id1_pull,0,0,0,0,0,188"], HEADER, {}, "tendon 0 is driven by servo 1"),
+        ([ROWS[0] + ",7"] + ROWS[1:], HEADER, {}, "row 1: the row has 9 fields, the header 8"),
+    ],
+)
 def test_opencr_errors_name_column_and_row(tmp_path, rows, header, kw, message):
     with pytest.raises(DataError, match=message.replace("(", r"\(").replace(")", r"\)")) as e:
         read_opencr(write_ocr(tmp_path, rows, header), **kw)
@@ -304,8 +319,9 @@ def test_the_shipped_recordings_have_no_glitch():
 
     train = read_opencr(tz.example_path("ftdcr_v4/train.csv"), n_wires=9)
     sets = [train, read_opencr(tz.example_path("ftdcr_v4/val.csv"), n_wires=9, servo_ids=train.servo_ids)]
-    sets += [read_opencr(tz.example_path(f"ftdcr_v{v}/{f}.csv"), n_wires=9) for v in (4, 6)
-             for f in ("tendon_pull",)] + [read_opencr(tz.example_path("ftdcr_v6/train.csv"), n_wires=9)]
+    sets += [
+        read_opencr(tz.example_path(f"ftdcr_v{v}/{f}.csv"), n_wires=9) for v in (4, 6) for f in ("tendon_pull",)
+    ] + [read_opencr(tz.example_path("ftdcr_v6/train.csv"), n_wires=9)]
     sets += [read_csv(tz.example_path(f"synthetic/{n}.csv")) for n in ("nominal_3w", "unknown_a_3w", "unknown_b_4w")]
     assert all(s.dropped == () for s in sets)
 

@@ -119,12 +119,17 @@ def test_recovered_values(tmp_path):
     assert abs(p["length_mm"] - 20.4) < 0.1 and abs(p["pitch_radius_mm"] - 2.15) < 0.05
 
 
-@pytest.mark.parametrize("truth, expected", [
-    (Truth(play=(0.25, 0.25, 0.25), rotation_deg=(0.0, 1.5, 0.0), translation=(0.5, 0.0, -0.4)),
-     {"backlash", "registration"}),
-    (Truth(n_wires=4, angle_offsets_deg=(5.0, 0.0, -4.0, 3.0), friction=0.15),
-     {"wire_angle_offset", "friction"}),
-], ids=["backlash+registration", "4w-angles+friction"])
+@pytest.mark.parametrize(
+    "truth, expected",
+    [
+        (
+            Truth(play=(0.25, 0.25, 0.25), rotation_deg=(0.0, 1.5, 0.0), translation=(0.5, 0.0, -0.4)),
+            {"backlash", "registration"},
+        ),
+        (Truth(n_wires=4, angle_offsets_deg=(5.0, 0.0, -4.0, 3.0), friction=0.15), {"wire_angle_offset", "friction"}),
+    ],
+    ids=["backlash+registration", "4w-angles+friction"],
+)
 def test_pairs_are_found(tmp_path, truth, expected):
     rep = run(tmp_path, "pair", truth)
     assert set(names(rep)) == expected
@@ -171,8 +176,10 @@ def test_glitches_robust_loss_keeps_the_fit(tmp_path):
     ls_play = list(ls["effects"][0]["params"].values()) if ls["effects"] else [0, 0, 0]
     rob_play = list(rob["effects"][0]["params"].values())
     # least squares is pulled by the glitches more than the robust fit
-    assert np.abs(np.subtract(rob_play, [0.2, 0.3, 0.15])).max() <= np.abs(
-        np.subtract(ls_play, [0.2, 0.3, 0.15])).max() + 1e-3
+    assert (
+        np.abs(np.subtract(rob_play, [0.2, 0.3, 0.15])).max()
+        <= np.abs(np.subtract(ls_play, [0.2, 0.3, 0.15])).max() + 1e-3
+    )
 
 
 def test_cli_end_to_end(tmp_path, capsys):
@@ -185,14 +192,21 @@ def test_cli_end_to_end(tmp_path, capsys):
     out = tmp_path / "out"
     assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet"]) == 2
     assert "column 'pz', row 100" in capsys.readouterr().err
-    assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet",
-                 "--drop-bad"]) == 0
+    assert main(["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet", "--drop-bad"]) == 0
     text = capsys.readouterr().out
     assert "effects added: registration" in text and "dropped rows: 1" in text
     rep = json.loads((out / "report.json").read_text())
     assert rep["dropped_rows"] == 1 and rep["dropped"][0]["row"] == 100 and rep["n_samples"] == 239
-    for key in ("rmse_declared_mm", "rmse_before_mm", "rmse_after_mm", "effects", "candidates",
-                "noise_floor_mm", "unexplained_structure", "parameters"):
+    for key in (
+        "rmse_declared_mm",
+        "rmse_before_mm",
+        "rmse_after_mm",
+        "effects",
+        "candidates",
+        "noise_floor_mm",
+        "unexplained_structure",
+        "parameters",
+    ):
         assert key in rep
     assert all({"name", "params", "rmse_after_mm"} <= set(e) for e in rep["effects"])
     assert all({"name", "score"} <= set(c) for c in rep["candidates"])

@@ -15,9 +15,20 @@ from tension_zones.calibration._problem import predict_theta
 from tension_zones.calibration.effects import ALL, BY_NAME, library, nominal, play
 
 D3 = tz.Design(3, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=2.0)
-TWO = tz.Robot([tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=1.0),
-                tz.Design(4, 50.0, 2.5, wire_angles=np.radians([10, 100, 190, 280]), backbone_EI=1500.0,
-                          wire_stiffness=60.0, preload=1.0)])
+TWO = tz.Robot(
+    [
+        tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=1.0),
+        tz.Design(
+            4,
+            50.0,
+            2.5,
+            wire_angles=np.radians([10, 100, 190, 280]),
+            backbone_EI=1500.0,
+            wire_stiffness=60.0,
+            preload=1.0,
+        ),
+    ]
+)
 
 
 def reference_play(q, c, reset):
@@ -34,14 +45,20 @@ def reference_play(q, c, reset):
 PLAY = jax.jit(play)
 
 
-@given(st.lists(st.floats(-2, 2), min_size=30, max_size=30),
-       st.lists(st.floats(0.0, 1.0), min_size=2, max_size=2), st.integers(1, 29))
+@given(
+    st.lists(st.floats(-2, 2), min_size=30, max_size=30),
+    st.lists(st.floats(0.0, 1.0), min_size=2, max_size=2),
+    st.integers(1, 29),
+)
 def test_play_operator_matches_reference(path, c, cut):
     q = np.stack([np.asarray(path), -np.asarray(path)], axis=1)  # one shape: one compilation
     reset = np.zeros(30)
     reset[cut] = 1.0  # a second recording starts here: the play restarts centred
-    np.testing.assert_allclose(PLAY(jnp.asarray(q), jnp.asarray(c), jnp.asarray(reset)),
-                               reference_play(q, np.asarray(c), reset > 0), atol=1e-12)
+    np.testing.assert_allclose(
+        PLAY(jnp.asarray(q), jnp.asarray(c), jnp.asarray(reset)),
+        reference_play(q, np.asarray(c), reset > 0),
+        atol=1e-12,
+    )
 
 
 def test_play_derivative_at_zero_is_half_the_direction():
@@ -76,8 +93,13 @@ def test_the_drifts_clock_holds_within_the_fit_datas_span():
 
 def _data(n, N, seed=0, frame="base"):
     rng = np.random.default_rng(seed)
-    return Dataset(sample=np.arange(n), q=rng.uniform(-1, 1, (n, N)), f=np.zeros((n, N and 3)),
-                   p=rng.normal(size=(n, 3)) + [0, 0, 20], frame=frame)
+    return Dataset(
+        sample=np.arange(n),
+        q=rng.uniform(-1, 1, (n, N)),
+        f=np.zeros((n, N and 3)),
+        p=rng.normal(size=(n, 3)) + [0, 0, 20],
+        frame=frame,
+    )
 
 
 def test_new_values_other_effects_and_another_robot_never_recompile():
@@ -85,11 +107,13 @@ def test_new_values_other_effects_and_another_robot_never_recompile():
     pb = Problem(RobotModel.of(tz.Robot(D3)), tz.Robot(D3), _data(12, 3), blocks)
     pb.fit(pb.null, ["backbone_EI"], np.ones(12), max_iter=2)
     size = compilations()
-    other = tz.Robot(tz.Design(3, 25.0, 1.5, wire_angles=[0.1, 2.0, 4.0], wire_stiffness=60.0, backbone_EI=900.0,
-                               preload=1.0))
+    other = tz.Robot(
+        tz.Design(3, 25.0, 1.5, wire_angles=[0.1, 2.0, 4.0], wire_stiffness=60.0, backbone_EI=900.0, preload=1.0)
+    )
     pb2 = Problem(RobotModel.of(other), other, _data(40, 3, seed=1), blocks)  # the same padding bucket
-    pb2.fit(pb2.null + 0.01, ["backbone_EI", "backlash", "registration", "gravity"], np.ones(40), huber_c=0.3,
-            max_iter=3)
+    pb2.fit(
+        pb2.null + 0.01, ["backbone_EI", "backlash", "registration", "gravity"], np.ones(40), huber_c=0.3, max_iter=3
+    )
     pb2.jacobian(pb2.null, ["backbone_EI", "friction"])
     assert compilations() == size
 
@@ -102,13 +126,18 @@ def test_padding_changes_nothing():
     theta = pb.null.copy()
     theta[pb.spec.slices()["backlash"]] = [0.1, 0.2, 0.3]
     on = jnp.asarray(pb.on(["backbone_EI", "backlash"]))
-    direct = jax.jit(predict_theta, static_argnums=0)(pb.spec, jnp.asarray(theta), on, pb.phys0,
-                                                      model.inputs(data))["p"]
+    direct = jax.jit(predict_theta, static_argnums=0)(pb.spec, jnp.asarray(theta), on, pb.phys0, model.inputs(data))[
+        "p"
+    ]
     np.testing.assert_allclose(pb.predict(theta, ["backbone_EI", "backlash"]), direct, atol=1e-12)
     # padded rows carry no weight: the fit of 40 samples equals that of a set whose 41st..64th
     # samples are wildly different (they would pull a fit that saw them)
-    wild = Dataset(sample=np.arange(64), q=np.r_[data.q, np.ones((24, 3))], f=np.r_[data.f, np.ones((24, 3))],
-                   p=np.r_[data.p, np.full((24, 3), 50.0)])
+    wild = Dataset(
+        sample=np.arange(64),
+        q=np.r_[data.q, np.ones((24, 3))],
+        f=np.r_[data.f, np.ones((24, 3))],
+        p=np.r_[data.p, np.full((24, 3), 50.0)],
+    )
     pb64 = Problem(model, tz.Robot(D3), wild, nominal("base") + library("base"))
     a = pb.fit(pb.null, ["backbone_EI"], np.ones(40), max_iter=10)
     b = pb64.fit(pb64.null, ["backbone_EI"], np.r_[np.ones(40), np.zeros(24)], max_iter=10)
@@ -122,8 +151,9 @@ def test_every_effect_is_defined_for_any_robot_and_null_means_none():
     curvature), the samples carry known tip forces (without a load the rod is constant curvature) and
     timestamps (the drift's clock)."""
     data = _data(30, 7, seed=3, frame="tracker")
-    data = dataclasses.replace(data, f=np.random.default_rng(5).normal(0.0, 0.3, (30, 3)),
-                               timestamp=60.0 * np.arange(30))
+    data = dataclasses.replace(
+        data, f=np.random.default_rng(5).normal(0.0, 0.3, (30, 3)), timestamp=60.0 * np.arange(30)
+    )
     pb = Problem(RobotModel.of(TWO), TWO, data, ALL)  # with the variable curvature on: the rod's program
     sl = pb.spec.slices()
     names = [b.name for b in ALL]
@@ -240,8 +270,16 @@ def test_a_program_compiled_ahead_on_a_thread_is_the_one_the_fits_run():
     thread.join()
     assert pb.compile_ahead(active, w) is None and compilations() == before + 1
     # the same numbers as the engine jitted and compiled the usual way
-    spec, *args = pb._args(np.clip(pb.null + 0.01, pb.lo, pb.hi), active, pb.mask(active), np.arange(768),
-                           np.r_[w, np.zeros(118)], np.inf, 4, *pb._fit_cols(pb.mask(active)))
+    spec, *args = pb._args(
+        np.clip(pb.null + 0.01, pb.lo, pb.hi),
+        active,
+        pb.mask(active),
+        np.arange(768),
+        np.r_[w, np.zeros(118)],
+        np.inf,
+        4,
+        *pb._fit_cols(pb.mask(active)),
+    )
     ref = jax.jit(partial(_problem._engine, spec), compiler_options=_problem.fast_compile_options())(*args)
     np.testing.assert_array_equal(theta, np.asarray(ref[0]))
 
@@ -285,8 +323,16 @@ def test_only_a_one_segment_rods_program_skips_llvms_optimisation_and_it_fits_th
 
     w = np.ones(40)
     theta = one.fit(one.null, rod, w, max_iter=6)
-    spec, *args = one._args(np.clip(one.null, one.lo, one.hi), rod, one.mask(rod), np.arange(one.n_padded),
-                            np.r_[w, np.zeros(one.n_padded - 40)], np.inf, 6, *one._fit_cols(one.mask(rod)))
+    spec, *args = one._args(
+        np.clip(one.null, one.lo, one.hi),
+        rod,
+        one.mask(rod),
+        np.arange(one.n_padded),
+        np.r_[w, np.zeros(one.n_padded - 40)],
+        np.inf,
+        6,
+        *one._fit_cols(one.mask(rod)),
+    )
     ref = jax.jit(partial(_problem._engine, spec), compiler_options=_problem.fast_compile_options(True))(*args)
     assert not np.allclose(theta, one.null)  # (it moved)
     np.testing.assert_allclose(theta, np.asarray(ref[0]), rtol=1e-9, atol=1e-12)

@@ -60,10 +60,15 @@ def run(folder, name, truth, seed=3, steps=10, opt_in=(), tilt_candidate=False):
     # validation file every accepted model's) have more rows: one more program for each variant among
     # those models (constant curvature or the rod, with or without the memory)
     rod = any(c["name"] == "variable_curvature" and "not_scored" not in c for c in rep["candidates"])
-    memory = {"variable_curvature" in step["effects"] for step in rep["steps"]} if any(
-        c["name"] == "bending_friction" for c in rep["candidates"]) else set()
+    memory = (
+        {"variable_curvature" in step["effects"] for step in rep["steps"]}
+        if any(c["name"] == "bending_friction" for c in rep["candidates"])
+        else set()
+    )
     own_rows = res.problem._rows < res.problem.n_padded
-    variants = {("variable_curvature" in step["effects"], "bending_friction" in step["effects"]) for step in rep["steps"]}
+    variants = {
+        ("variable_curvature" in step["effects"], "bending_friction" in step["effects"]) for step in rep["steps"]
+    }
     assert compilations() - before <= 1 + rod + len(memory) + own_rows * len(variants)
     return rep
 
@@ -136,8 +141,26 @@ def test_the_command_line_adds_the_bending_friction_and_recovers_it(tmp_path):
     truth = EFFECTS["bending_friction"]
     train, val, design = write_robot_set(tmp_path, "bf", truth, seed=11)
     out = tmp_path / "out"
-    assert main(["calibrate", str(train), "--format", "opencr", "--design", str(design), "--validate", str(val),
-                 "--effects", "+bending_friction", "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "calibrate",
+                str(train),
+                "--format",
+                "opencr",
+                "--design",
+                str(design),
+                "--validate",
+                str(val),
+                "--effects",
+                "+bending_friction",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     rep = json.loads((out / "report.json").read_text())
     assert names(rep) == ["bending_friction"]
     got = np.array(list(rep["parameters"]["fitted"]["bending_friction"].values()))
@@ -162,13 +185,38 @@ def test_an_effect_outside_the_library_is_flagged_not_misnamed(tmp_path):
 def test_command_line_on_another_robot_with_only_its_design_file(tmp_path, capsys):
     train, val, design = write_robot_set(tmp_path, "pre", EFFECTS["preload"], seed=7)
     out = tmp_path / "out"
-    args = ["calibrate", str(train), "--format", "opencr", "--design", str(design), "--validate", str(val),
-            "--out", str(out), "--quiet"]
+    args = [
+        "calibrate",
+        str(train),
+        "--format",
+        "opencr",
+        "--design",
+        str(design),
+        "--validate",
+        str(val),
+        "--out",
+        str(out),
+        "--quiet",
+    ]
     assert main(args) == 0
     rep = json.loads((out / "report.json").read_text())
-    for key in ("rmse_declared_mm", "rmse_before_mm", "rmse_after_mm", "effects", "candidates", "rounds",
-                "noise_floor_mm", "unexplained_structure", "parameters", "rmse_validate_mm",
-                "rmse_validate_aligned_mm", "steps", "baselines", "correlations", "holdout"):
+    for key in (
+        "rmse_declared_mm",
+        "rmse_before_mm",
+        "rmse_after_mm",
+        "effects",
+        "candidates",
+        "rounds",
+        "noise_floor_mm",
+        "unexplained_structure",
+        "parameters",
+        "rmse_validate_mm",
+        "rmse_validate_aligned_mm",
+        "steps",
+        "baselines",
+        "correlations",
+        "holdout",
+    ):
         assert key in rep, key
     assert [e["name"] for e in rep["effects"]] == ["preload"]
     assert rep["rmse_validate_aligned_mm"] <= rep["rmse_validate_mm"] < 1.3 * rep["noise_floor_mm"]
@@ -277,8 +325,13 @@ def test_a_single_rod_segment_under_its_weight_is_named_a_rod(tmp_path):
     0.1271 against 0.1272 mm): either is accepted here. With the tracker's tilt in the nominal frame a
     change of the segment's geometry ties with the rod too (held out 0.0858 against 0.0863 mm, 1.06x
     the floor): the rod's refit must reach the floor and tie with what is kept."""
-    truth = RobotTruth(design={"segments": [dict(ROBOT["segments"][1])]}, pattern_rotation_deg=(12.0,),
-                       EI_factors=(1.1,), gravity=(0.0, 0.003, -0.004), pieces=6)
+    truth = RobotTruth(
+        design={"segments": [dict(ROBOT["segments"][1])]},
+        pattern_rotation_deg=(12.0,),
+        EI_factors=(1.1,),
+        gravity=(0.0, 0.003, -0.004),
+        pieces=6,
+    )
     rep = run(tmp_path, "rod_one", truth, steps=14)
     got = names(rep)
     assert len(got) == 2 and got[0] in ("gravity", "tip_force") and got[1] in ("variable_curvature", "geometry")
@@ -294,8 +347,12 @@ def test_a_single_segments_hole_clearance_is_named_and_fitted(tmp_path):
     """One segment (the robot's second alone): the clearance has only its own-segment part there, which
     moves the tip only where wires are slack (an even shortening of taut wires only changes their
     tension), so its score is low (about 2): it is named on a second look, its value within 5 %."""
-    truth = RobotTruth(design={"segments": [dict(ROBOT["segments"][1])]}, pattern_rotation_deg=(12.0,),
-                       EI_factors=(1.1,), clearance=(0.2, 0.0))
+    truth = RobotTruth(
+        design={"segments": [dict(ROBOT["segments"][1])]},
+        pattern_rotation_deg=(12.0,),
+        EI_factors=(1.1,),
+        clearance=(0.2, 0.0),
+    )
     rep = run(tmp_path, "clearance_one", truth)
     assert names(rep) == ["clearance"]
     assert abs(rep["effects"][0]["params"]["c_own_mm_per_rad"] - 0.2) < 0.01
@@ -314,9 +371,17 @@ def test_a_drift_of_the_wires_is_named_and_fitted(tmp_path):
     assert rep["model"]["clock"][0] == 100.0  # the training file's first timestamp
 
 
-@pytest.mark.parametrize("pair", [("geometry", "registration"), ("backlash", "preload"), ("clearance", "friction"),
-                                  ("compression", "clearance"), ("compression", "preload"),
-                                  ("compression", "friction")])
+@pytest.mark.parametrize(
+    "pair",
+    [
+        ("geometry", "registration"),
+        ("backlash", "preload"),
+        ("clearance", "friction"),
+        ("compression", "clearance"),
+        ("compression", "preload"),
+        ("compression", "friction"),
+    ],
+)
 def test_pairs_of_effects_are_both_named(tmp_path, pair):
     """Two effects at once. Geometry with a tracker tilt: it takes the second look where no score is
     significant (a marker offset would otherwise be named). The hole clearance
@@ -326,8 +391,11 @@ def test_pairs_of_effects_are_both_named(tmp_path, pair):
     a wire pulled alone (test_compression.py)."""
     a, b = pair
     nominal = RobotTruth()
-    own_b = {f.name: getattr(EFFECTS[b], f.name) for f in dataclasses.fields(nominal)
-             if getattr(EFFECTS[b], f.name) != getattr(nominal, f.name)}  # what b's truth sets
+    own_b = {
+        f.name: getattr(EFFECTS[b], f.name)
+        for f in dataclasses.fields(nominal)
+        if getattr(EFFECTS[b], f.name) != getattr(nominal, f.name)
+    }  # what b's truth sets
     rep = run(tmp_path, f"{a}_{b}", dataclasses.replace(EFFECTS[a], **own_b), steps=6)
     assert sorted(names(rep)) == sorted(n for n in pair if n not in FRAME)  # a tracker tilt is the frame's
     floor = rep["noise_floor_mm"]
@@ -342,8 +410,9 @@ def test_a_round_with_nothing_to_score_ends_the_loop_cleanly(tmp_path):
 
     train_csv, _, design = write_robot_set(tmp_path, "noload", RobotTruth(), seed=5, steps=6)
     robot = tz.Robot.from_json(design)
-    rep = calibrate(read_opencr(train_csv, n_wires=robot.n_wires), robot,
-                    library=(BY_NAME["variable_curvature"],)).to_json()
+    rep = calibrate(
+        read_opencr(train_csv, n_wires=robot.n_wires), robot, library=(BY_NAME["variable_curvature"],)
+    ).to_json()
     assert names(rep) == [] and rep["rounds"] == [] and not rep["unexplained_structure"]
     assert rep["rmse_after_mm"] == rep["rmse_before_mm"] < 1.3 * rep["noise_floor_mm"]
 

@@ -48,9 +48,23 @@ def test_bad_out_paths(tmp_path, capsys):
 
 @pytest.mark.slow
 def test_console_script_runs(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "tension_zones.cli", "maps", "--wires", "5",
-                        "--out", str(tmp_path / "m5.png"), "--quiet"],
-                       capture_output=True, text=True, timeout=300, check=False)
+    r = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "tension_zones.cli",
+            "maps",
+            "--wires",
+            "5",
+            "--out",
+            str(tmp_path / "m5.png"),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr
     assert "wires" in r.stdout and r.stderr == ""
 
@@ -62,23 +76,54 @@ def test_sweep_compliance_adds_the_statics_arrays(tmp_path):
     import tension_zones as tz
 
     out = tmp_path / "c.npz"
-    assert main(["sweep", "--wires", "4", "--length", "20", "--pitch-radius", "2", "--compliance",
-                 "--wire-stiffness", "75", "--backbone-EI", "1200", "--load", "5,0,0",
-                 "--preload", "5", "--quiet", "--out", str(out)]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--wires",
+                "4",
+                "--length",
+                "20",
+                "--pitch-radius",
+                "2",
+                "--compliance",
+                "--wire-stiffness",
+                "75",
+                "--backbone-EI",
+                "1200",
+                "--load",
+                "5,0,0",
+                "--preload",
+                "5",
+                "--quiet",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     z = np.load(out)
     assert z["theta_L_deg"].shape == (10, 25)  # the paper's Sec. 6.2 grid by default
     np.testing.assert_allclose(z["theta_L_deg"][:, 0], np.linspace(89, 45, 10))
-    for k in ("deflection_mm_full", "deflection_mm_reduced", "deflection_deg_full",
-              "deflection_deg_reduced", "n_taut_statics", "feasible", "dp_max_reduced", "kci_v_full"):
+    for k in (
+        "deflection_mm_full",
+        "deflection_mm_reduced",
+        "deflection_deg_full",
+        "deflection_deg_reduced",
+        "n_taut_statics",
+        "feasible",
+        "dp_max_reduced",
+        "kci_v_full",
+    ):
         assert z[k].shape == (10, 25), k
     assert z["tensions"].shape == (10, 25, 4)
     # with a preload every wire is taut: reduced equals traditional
     np.testing.assert_allclose(z["deflection_mm_reduced"], z["deflection_mm_full"], rtol=1e-9)
     d = tz.Design(4, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=5.0)
-    ref = tz.compliance_pose(d, np.radians(z["theta_L_deg"][3, 7]), np.radians(z["delta_deg"][3, 7]),
-                             np.array([5.0, 0, 0]))
-    np.testing.assert_allclose(z["deflection_mm_reduced"][3, 7], ref["deflection_mm_reduced"],
-                               rtol=1e-12)
+    ref = tz.compliance_pose(
+        d, np.radians(z["theta_L_deg"][3, 7]), np.radians(z["delta_deg"][3, 7]), np.array([5.0, 0, 0])
+    )
+    np.testing.assert_allclose(z["deflection_mm_reduced"][3, 7], ref["deflection_mm_reduced"], rtol=1e-12)
 
 
 @pytest.mark.parametrize(
@@ -86,10 +131,11 @@ def test_sweep_compliance_adds_the_statics_arrays(tmp_path):
     [
         (["--compliance"], "--compliance needs --wire-stiffness, --backbone-EI, --load"),
         (["--load", "1,2,3"], "go with --compliance"),
-        (["--compliance", "--wire-stiffness", "75", "--backbone-EI", "1200", "--load", "1,x,3"],
-         "--load must be"),
-        (["--compliance", "--wire-stiffness", "-75", "--backbone-EI", "1200", "--load", "1,0,0"],
-         "wire_stiffness must be positive"),
+        (["--compliance", "--wire-stiffness", "75", "--backbone-EI", "1200", "--load", "1,x,3"], "--load must be"),
+        (
+            ["--compliance", "--wire-stiffness", "-75", "--backbone-EI", "1200", "--load", "1,0,0"],
+            "wire_stiffness must be positive",
+        ),
     ],
 )
 def test_sweep_compliance_errors(tmp_path, capsys, extra, needle):
@@ -126,8 +172,7 @@ print("lazy ok")
 
 @pytest.mark.slow
 def test_help_and_import_do_not_import_jax():
-    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300,
-                       check=False)
+    r = subprocess.run([sys.executable, "-c", LAZY], capture_output=True, text=True, timeout=300, check=False)
     assert r.returncode == 0, r.stderr[-2000:]
     assert r.stdout.strip().endswith("lazy ok")
 

@@ -23,9 +23,11 @@ jax.config.update("jax_enable_x64", True)
 
 
 def robot(n_segments=3):
-    segs = [tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=12000.0, preload=3.0),
-            tz.Design(4, 62.5, 4.0, wire_stiffness=40.0, backbone_EI=9000.0, preload=2.0),
-            tz.Design(3, 64.0, 4.5, wire_stiffness=60.0, backbone_EI=15000.0, preload=4.0)][:n_segments]
+    segs = [
+        tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=12000.0, preload=3.0),
+        tz.Design(4, 62.5, 4.0, wire_stiffness=40.0, backbone_EI=9000.0, preload=2.0),
+        tz.Design(3, 64.0, 4.5, wire_stiffness=60.0, backbone_EI=15000.0, preload=4.0),
+    ][:n_segments]
     return tz.Robot(segs)
 
 
@@ -89,8 +91,9 @@ def test_zero_compliance_is_the_rigid_backbone():
     q = commands(rob, np.random.default_rng(0))
     rigid = dict(_declared(rob))
     del rigid["axial_compliance"]
-    np.testing.assert_array_equal(np.asarray(tip(phys_of(rob, np.zeros(3)), rob.structure, q)),
-                                  np.asarray(tip(rigid, rob.structure, q)))
+    np.testing.assert_array_equal(
+        np.asarray(tip(phys_of(rob, np.zeros(3)), rob.structure, q)), np.asarray(tip(rigid, rob.structure, q))
+    )
 
 
 def brute_force_stretch(s0, k, G):
@@ -111,8 +114,9 @@ def test_the_stretch_is_the_root_whatever_the_taut_set(seed):
     rob = robot()
     phys = phys_of(rob, rng.uniform(0.0, 2e-2, 3))
     phys["wire_stiffness"] = jnp.asarray(rng.uniform(10.0, 150.0, rob.n_wires))
-    sm = eq._Sample(phys, rob.structure, jnp.zeros(rob.n_wires), jnp.zeros(3), jnp.zeros(rob.n_wires),
-                    jnp.asarray(False))
+    sm = eq._Sample(
+        phys, rob.structure, jnp.zeros(rob.n_wires), jnp.zeros(3), jnp.zeros(rob.n_wires), jnp.asarray(False)
+    )
     s0 = rng.normal(0.0, 1.0, rob.n_wires)
     s = np.asarray(eq._relax(jnp.asarray(s0), sm.k, sm.G))
     np.testing.assert_allclose(s, brute_force_stretch(s0, np.asarray(sm.k), np.asarray(sm.G)), atol=1e-10)
@@ -128,8 +132,13 @@ def test_derivatives_in_the_compliance_at_zero_and_beyond():
     # at zero (the score test's null): one-sided second-order differences
     J = np.asarray(jax.jacfwd(f)(jnp.zeros(3)))
     h = 1e-6
-    fd = np.stack([(-3 * f(jnp.zeros(3)) + 4 * f(jnp.zeros(3).at[i].set(h)) - f(jnp.zeros(3).at[i].set(2 * h)))
-                   / (2 * h) for i in range(3)], axis=1)
+    fd = np.stack(
+        [
+            (-3 * f(jnp.zeros(3)) + 4 * f(jnp.zeros(3).at[i].set(h)) - f(jnp.zeros(3).at[i].set(2 * h))) / (2 * h)
+            for i in range(3)
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(J, fd, rtol=1e-4, atol=1e-3)
     assert np.abs(J).max() > 10.0  # mm per (mm/N): the effect is seen at zero
     a0 = jnp.asarray([2e-3, 4e-3, 1e-3])
@@ -143,8 +152,13 @@ def test_derivatives_in_the_commands_with_compression():
     q0 = commands(rob, np.random.default_rng(4))
     phys = phys_of(rob, [3e-3, 2e-3, 1e-3])
     J = np.asarray(jax.jacfwd(lambda q: tip(phys, rob.structure, q))(q0))
-    fd = np.stack([(tip(phys, rob.structure, q0.at[i].add(1e-6)) - tip(phys, rob.structure, q0.at[i].add(-1e-6)))
-                   / 2e-6 for i in range(rob.n_wires)], axis=1)
+    fd = np.stack(
+        [
+            (tip(phys, rob.structure, q0.at[i].add(1e-6)) - tip(phys, rob.structure, q0.at[i].add(-1e-6))) / 2e-6
+            for i in range(rob.n_wires)
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)
 
 
@@ -186,12 +200,15 @@ def test_with_friction_and_clearance_the_solve_is_the_root_of_the_force_and_diff
     sm = eq._Sample(phys, rob.structure, q0, jnp.zeros(3), direction, jnp.asarray(False))
     assert float(jnp.max(jnp.abs(sm.force(B.reshape(-1))))) < 1e-9
     J = np.asarray(jax.jacfwd(lambda a: tip_f(a, q0)[0])(a0))
-    fd = np.stack([(tip_f(a0.at[i].add(1e-7), q0)[0] - tip_f(a0.at[i].add(-1e-7), q0)[0]) / 2e-7
-                   for i in range(3)], axis=1)
+    fd = np.stack(
+        [(tip_f(a0.at[i].add(1e-7), q0)[0] - tip_f(a0.at[i].add(-1e-7), q0)[0]) / 2e-7 for i in range(3)], axis=1
+    )
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-5)
     J = np.asarray(jax.jacfwd(lambda q: tip_f(a0, q)[0])(q0))
-    fd = np.stack([(tip_f(a0, q0.at[i].add(1e-6))[0] - tip_f(a0, q0.at[i].add(-1e-6))[0]) / 2e-6
-                   for i in range(rob.n_wires)], axis=1)
+    fd = np.stack(
+        [(tip_f(a0, q0.at[i].add(1e-6))[0] - tip_f(a0, q0.at[i].add(-1e-6))[0]) / 2e-6 for i in range(rob.n_wires)],
+        axis=1,
+    )
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)
 
 

@@ -28,10 +28,8 @@ def test_defaults_and_even_angles():
         ({"n_wires": 3, "length": float("nan"), "pitch_radius": 2.0}, "length"),
         ({"n_wires": 3, "length": 20.0, "pitch_radius": float("inf")}, "pitch_radius"),
         ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0]}, "wire_angles"),
-        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, 2 * np.pi]},
-         "wire_angles"),
-        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, np.nan]},
-         "wire_angles"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, 2 * np.pi]}, "wire_angles"),
+        ({"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_angles": [0.0, 1.0, np.nan]}, "wire_angles"),
         ({"n_wires": 3, "length": "long", "pitch_radius": 2.0}, "length"),
         ({"n_wires": 3, "length": [1.0, 2.0], "pitch_radius": 2.0}, "length"),
     ],
@@ -102,8 +100,7 @@ def test_from_dict_roundtrip_and_errors(tmp_path):
     with pytest.raises(ValueError, match="length_mm"):
         tz.Design.from_dict({"n_wires": 3, "pitch_radius_mm": 2.0})
     with pytest.raises(ValueError, match="wire_angles_deg"):
-        tz.Design.from_dict({"n_wires": 3, "length_mm": 20, "pitch_radius_mm": 2,
-                             "wire_angles_deg": [0, 90]})
+        tz.Design.from_dict({"n_wires": 3, "length_mm": 20, "pitch_radius_mm": 2, "wire_angles_deg": [0, 90]})
     p = tmp_path / "bad.json"
     p.write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
@@ -190,8 +187,11 @@ def test_missing_physical_keys_are_named_on_request():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # opt-in: no warning by default
         assert float(tz.Design.from_dict(d).backbone_EI) == tz.DEFAULT_BACKBONE_EI
-    with pytest.warns(MissingDesignKeyWarning, match=r"'backbone_EI_Nmm2' \(default 1200 used\), "
-                                                     r"'preload_N' \(default 0 used\)") as rec:
+    with pytest.warns(
+        MissingDesignKeyWarning,
+        match=r"'backbone_EI_Nmm2' \(default 1200 used\), "
+        r"'preload_N' \(default 0 used\)",
+    ) as rec:
         tz.Design.from_dict(d, warn_missing=True)
     assert len(rec) == 1 and "wire_stiffness" not in str(rec[0].message)
     full = {**d, "backbone_EI_Nmm2": 900.0, "preload_N": 1.0}

@@ -57,7 +57,9 @@ def assert_stats_equal(got, refs, rtol=1e-12):
 designs_st = st.lists(  # length, pitch radius, offsets of the three wires from even spacing (rad); the
     # lengths from 8 mm: a pitch radius above half the length is refused (Design: MAX_RADIUS_PER_LENGTH)
     st.tuples(st.floats(8.0, 40.0), st.floats(0.5, 4.0), *[st.floats(-0.9, 0.9)] * 3),
-    min_size=1, max_size=6)
+    min_size=1,
+    max_size=6,
+)
 
 
 @settings(max_examples=10, deadline=None)
@@ -65,8 +67,9 @@ designs_st = st.lists(  # length, pitch radius, offsets of the three wires from 
 def test_statistics_equal_the_single_design_sweep(values, dq):
     """Acceptance: per-design statistics equal the single-design sweep's to 1e-12 (float64), for
     random designs (up to 6: two chunks of 4, the last padded)."""
-    designs = [tz.Design(3, L, r, wire_angles=rad([0.0, 120.0, 240.0]) + np.array(offsets))
-               for L, r, *offsets in values]
+    designs = [
+        tz.Design(3, L, r, wire_angles=rad([0.0, 120.0, 240.0]) + np.array(offsets)) for L, r, *offsets in values
+    ]
     got = explore_designs(batch(designs), TH, DE, dq, designs_per_chunk=4, quiet=True)
     assert_stats_equal(got, [reference(d, TH, DE, dq) for d in designs])
 
@@ -76,9 +79,18 @@ def test_statistics_with_a_load_and_the_papers_grid(rng):
     poses: two steps of 1320, the last padded)."""
     th, de = rad(grid_deg(85, 5)), rad(grid_deg(360, 2.5))
     # the first design's wires lie on a half circle: some poses cannot be held by pulling
-    designs = [tz.Design(3, rng.uniform(10, 30), rng.uniform(0.8, 3), wire_stiffness=rng.uniform(55, 105),
-                         backbone_EI=rng.uniform(100, 2000), preload=p, wire_angles=rad(angles))
-               for p, angles in ((0.0, [0.0, 90.0, 180.0]), (0.0, [10.0, 125.0, 250.0]), (3.0, [0.0, 120, 240]))]
+    designs = [
+        tz.Design(
+            3,
+            rng.uniform(10, 30),
+            rng.uniform(0.8, 3),
+            wire_stiffness=rng.uniform(55, 105),
+            backbone_EI=rng.uniform(100, 2000),
+            preload=p,
+            wire_angles=rad(angles),
+        )
+        for p, angles in ((0.0, [0.0, 90.0, 180.0]), (0.0, [10.0, 125.0, 250.0]), (3.0, [0.0, 120, 240]))
+    ]
     load = [5.0, -2.0, 1.0]
     got = explore_designs(batch(designs), th, de, 0.4, load, designs_per_chunk=4, quiet=True)
     refs = [reference(d, th, de, 0.4, load) for d in designs]
@@ -88,16 +100,26 @@ def test_statistics_with_a_load_and_the_papers_grid(rng):
 
 def test_no_recompile_when_only_values_change(rng):
     """New design values, number of designs, dq, load and grid (values and size): the same program."""
+
     def some(n_designs, n=3):
-        return batch([tz.Design(n, rng.uniform(10, 30), rng.uniform(1, 3), wire_stiffness=rng.uniform(50, 100),
-                                preload=rng.uniform(0, 2)) for _ in range(n_designs)])
+        return batch(
+            [
+                tz.Design(
+                    n,
+                    rng.uniform(10, 30),
+                    rng.uniform(1, 3),
+                    wire_stiffness=rng.uniform(50, 100),
+                    preload=rng.uniform(0, 2),
+                )
+                for _ in range(n_designs)
+            ]
+        )
 
     explore_designs(some(5), TH, DE, 0.4, designs_per_chunk=4, quiet=True)
     explore_designs(some(2), TH, DE, 0.4, [5.0, 0, 0], designs_per_chunk=4, quiet=True)
     n0 = compiled_chunk_count()
     explore_designs(some(9), TH + 0.01, DE, 0.7, designs_per_chunk=4, quiet=True)
-    explore_designs(some(3), rad(grid_deg(80, 4)), rad(grid_deg(350, 50)), 0.2, designs_per_chunk=4,
-                    quiet=True)
+    explore_designs(some(3), rad(grid_deg(80, 4)), rad(grid_deg(350, 50)), 0.2, designs_per_chunk=4, quiet=True)
     explore_designs(some(6), TH, DE, 0.4, [1.0, 2.0, -3.0, 0.5, 0, 0], designs_per_chunk=4, quiet=True)
     assert compiled_chunk_count() == n0
 
@@ -111,8 +133,7 @@ def test_engine_errors_are_clear(d3):
     with pytest.raises(ValueError, match="unknown reduction 'median'"):
         sweep_designs(_kinematic_pose, one, TH, DE, 0.4, stats=[("a", "dp_max_full", "median")])
     with pytest.raises(ValueError, match="designs_per_chunk must be a positive integer"):
-        sweep_designs(_kinematic_pose, one, TH, DE, 0.4, stats=[("a", "dp_max_full", "max")],
-                      designs_per_chunk=0)
+        sweep_designs(_kinematic_pose, one, TH, DE, 0.4, stats=[("a", "dp_max_full", "max")], designs_per_chunk=0)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -121,13 +142,21 @@ def test_engine_errors_are_clear(d3):
 def test_halton_is_scipys_unscrambled_sequence():
     from scipy.stats import qmc
 
-    np.testing.assert_allclose(tz.design.halton(200, 6), qmc.Halton(6, scramble=False).random(201)[1:],
-                               rtol=0, atol=1e-15)
+    np.testing.assert_allclose(
+        tz.design.halton(200, 6), qmc.Halton(6, scramble=False).random(201)[1:], rtol=0, atol=1e-15
+    )
 
 
 def test_space_samples():
-    grid = tz.parse_space({"n_wires": [3, 4], "pitch_radius_mm": [1, 3], "length_mm": {"values": [10, 20]},
-                           "wire_angle_offset_deg": [-5, 5], "sample": {"points": 3}})
+    grid = tz.parse_space(
+        {
+            "n_wires": [3, 4],
+            "pitch_radius_mm": [1, 3],
+            "length_mm": {"values": [10, 20]},
+            "wire_angle_offset_deg": [-5, 5],
+            "sample": {"points": 3},
+        }
+    )
     assert grid.count(3) == 3 * 2 * 3**3 and grid.count(4) == 3 * 2 * 3**4
     cols = grid.columns(3)
     assert set(cols["pitch_radius_mm"]) == {1.0, 2.0, 3.0} and set(cols["length_mm"]) == {10.0, 20.0}
@@ -135,8 +164,9 @@ def test_space_samples():
     assert np.all(np.abs(cols["wire_angle_2_deg"] - 120) <= 5)
     d = grid.batch(4)
     assert d.n_wires == 4 and d.wire_angles.shape == (grid.count(4), 4)
-    halton = tz.parse_space({"n_wires": [3, 5], "pitch_radius_mm": [1, 3], "sample": {"method": "halton",
-                                                                                      "designs": 50}})
+    halton = tz.parse_space(
+        {"n_wires": [3, 5], "pitch_radius_mm": [1, 3], "sample": {"method": "halton", "designs": 50}}
+    )
     a, b = halton.columns(3), halton.columns(5)
     np.testing.assert_array_equal(a["pitch_radius_mm"], b["pitch_radius_mm"])  # paired across counts
     assert a["pitch_radius_mm"].min() >= 1 and a["pitch_radius_mm"].max() <= 3
@@ -166,8 +196,13 @@ def test_pareto_front_matches_brute_force(rng, k):
 # ------------------------------------------------------------------------------------------------
 # Output folder: table, resuming
 # ------------------------------------------------------------------------------------------------
-SPACE = {**SMALL, "n_wires": 3, "pitch_radius_mm": [1.0, 3.0], "wire_angle_offset_deg": [-20, 20],
-         "sample": {"method": "halton", "designs": 18}}
+SPACE = {
+    **SMALL,
+    "n_wires": 3,
+    "pitch_radius_mm": [1.0, 3.0],
+    "wire_angle_offset_deg": [-20, 20],
+    "sample": {"method": "halton", "designs": 18},
+}
 
 
 def assert_tables_identical(a, b):
@@ -247,12 +282,25 @@ def test_two_jax_distributed_processes_give_the_same_table(tmp_path, default_cod
     path = os.pathsep.join([str(Path(__file__).parents[1])] + sys.path)
     env = default_codegen_env("--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu", PYTHONPATH=path)
     port, out = str(free_port()), tmp_path / "two"
-    procs = [subprocess.Popen([sys.executable, "-c", DISTRIBUTED, port, str(i), str(out), json.dumps(SPACE)],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
-             for i in (0, 1)]
-    procs.append(subprocess.Popen([sys.executable, "-c", ONE_PROCESS, str(tmp_path / "one"), json.dumps(SPACE)],
-                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                                  env=default_codegen_env(JAX_PLATFORMS="cpu", PYTHONPATH=path)))
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", DISTRIBUTED, port, str(i), str(out), json.dumps(SPACE)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=env,
+        )
+        for i in (0, 1)
+    ]
+    procs.append(
+        subprocess.Popen(
+            [sys.executable, "-c", ONE_PROCESS, str(tmp_path / "one"), json.dumps(SPACE)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=default_codegen_env(JAX_PLATFORMS="cpu", PYTHONPATH=path),
+        )
+    )
     outs = [p.communicate(timeout=300) for p in procs]
     for p, (o, e) in zip(procs, outs):
         assert p.returncode == 0, e[-3000:]
@@ -286,31 +334,47 @@ def test_cli_explore_writes_table_front_and_plots_and_resumes(tmp_path, capsys):
     header = (out / "table.csv").read_text().splitlines()[0].split(",")
     assert header == list(table)
     # the same exploration again: resumed (nothing to compute), said in one line; --quiet: no bar
-    assert main(["explore", "--space", space, "--out", str(out), "--quiet",
-                 "--front", "max:wire_stiffness_N_per_mm,deflection_mm_reduced_worst"]) == 0
+    assert (
+        main(
+            [
+                "explore",
+                "--space",
+                space,
+                "--out",
+                str(out),
+                "--quiet",
+                "--front",
+                "max:wire_stiffness_N_per_mm,deflection_mm_reduced_worst",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr()
     assert "resuming the exploration" in text.out and "5 of 5 chunks done" in text.out
     assert text.err == ""
 
 
-@pytest.mark.parametrize("space, needle", [
-    ({"pitch_radius": [1, 2]}, "unknown space key(s) ['pitch_radius']"),
-    ({"pitch_radius_mm": [3.0, 1.0]}, "space key 'pitch_radius_mm': min 3.0 is larger than max 1.0"),
-    ({"length_mm": [20, 20]}, "space key 'length_mm': [20.0, 20.0] is an empty range"),
-    ({"wire_stiffness_N_per_mm": {"values": []}}, "space key 'wire_stiffness_N_per_mm': values must be"),
-    ({"n_wires": [2, 3]}, "space key 'n_wires': must be a list of integers from 3 to 16"),
-    ({"n_wires": 2}, "space key 'n_wires'"),
-    ({"pitch_radius_mm": [-1, 2]}, "space key 'pitch_radius_mm': must be > 0.0"),
-    ({"theta_L_deg": [80, 10, 5]}, "space key 'theta_L_deg': min 80.0 is larger than max 10.0"),
-    ({"sample": {"method": "sobol"}}, "space key 'sample.method'"),
-    ({"sample": {"designs": 100}}, "space key 'sample.designs': does not go with method 'grid'"),
-    ({"sample": {"method": "halton", "desings": 100}}, "space key 'sample': unknown sub-key(s) ['desings']"),
-    ({"wire_angle_offset_deg": [-50, 50]}, "space key 'wire_angle_offset_deg': spans 100 deg"),
-    ({"chunks": {"designs": 0}}, "space key 'chunks.designs': must be a positive integer"),
-    ({"load_N": [1, 2]}, "space key 'load_N'"),
-    ("[1, 2]", "a design space must be a JSON object"),
-    ("{", "is not valid JSON"),
-])
+@pytest.mark.parametrize(
+    "space, needle",
+    [
+        ({"pitch_radius": [1, 2]}, "unknown space key(s) ['pitch_radius']"),
+        ({"pitch_radius_mm": [3.0, 1.0]}, "space key 'pitch_radius_mm': min 3.0 is larger than max 1.0"),
+        ({"length_mm": [20, 20]}, "space key 'length_mm': [20.0, 20.0] is an empty range"),
+        ({"wire_stiffness_N_per_mm": {"values": []}}, "space key 'wire_stiffness_N_per_mm': values must be"),
+        ({"n_wires": [2, 3]}, "space key 'n_wires': must be a list of integers from 3 to 16"),
+        ({"n_wires": 2}, "space key 'n_wires'"),
+        ({"pitch_radius_mm": [-1, 2]}, "space key 'pitch_radius_mm': must be > 0.0"),
+        ({"theta_L_deg": [80, 10, 5]}, "space key 'theta_L_deg': min 80.0 is larger than max 10.0"),
+        ({"sample": {"method": "sobol"}}, "space key 'sample.method'"),
+        ({"sample": {"designs": 100}}, "space key 'sample.designs': does not go with method 'grid'"),
+        ({"sample": {"method": "halton", "desings": 100}}, "space key 'sample': unknown sub-key(s) ['desings']"),
+        ({"wire_angle_offset_deg": [-50, 50]}, "space key 'wire_angle_offset_deg': spans 100 deg"),
+        ({"chunks": {"designs": 0}}, "space key 'chunks.designs': must be a positive integer"),
+        ({"load_N": [1, 2]}, "space key 'load_N'"),
+        ("[1, 2]", "a design space must be a JSON object"),
+        ("{", "is not valid JSON"),
+    ],
+)
 def test_bad_space_files_are_one_line_errors(tmp_path, capsys, space, needle):
     out = tmp_path / "out"
     assert main(["explore", "--space", write_space(tmp_path, space), "--out", str(out)]) == 2
@@ -341,8 +405,13 @@ def test_cli_out_folder_is_checked_before_computing(tmp_path, capsys):
     assert compiled_chunk_count() == n0  # refused before any computation
     # a folder holding another exploration: refused, naming what differs
     (tmp_path / "done").mkdir()
-    manifest = {"format": _explore.FORMAT, "space": tz.parse_space(json.loads(Path(space).read_text())).raw,
-                "columns": [s[0] for s in _stats(False)], "done": {"3": []}, "chunks_total": 5}
+    manifest = {
+        "format": _explore.FORMAT,
+        "space": tz.parse_space(json.loads(Path(space).read_text())).raw,
+        "columns": [s[0] for s in _stats(False)],
+        "done": {"3": []},
+        "chunks_total": 5,
+    }
     (tmp_path / "done" / "manifest.json").write_text(json.dumps(manifest))
     assert main(["explore", "--space", other, "--out", str(tmp_path / "done")]) == 2
     assert "holds another exploration (space key 'pitch_radius_mm' differs)" in capsys.readouterr().err

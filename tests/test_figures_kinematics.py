@@ -33,8 +33,12 @@ def test_registered_as_a_reproduce_step():
 def test_figures_written(step):
     out, written, _ = step
     names = {p.name for p in written}
-    assert {"fig9_kci.png", "fig10_sigma_min.png", "fig11_position_uncertainty.png",
-            "fig12_orientation_uncertainty.png"} <= names
+    assert {
+        "fig9_kci.png",
+        "fig10_sigma_min.png",
+        "fig11_position_uncertainty.png",
+        "fig12_orientation_uncertainty.png",
+    } <= names
     for p in written:
         assert p.parent == out and p.stat().st_size > 50_000, p
 

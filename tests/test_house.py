@@ -9,8 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run(code, env):
-    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False,
-                         cwd=ROOT)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=False, cwd=ROOT)
     assert out.returncode == 0, out.stderr[-2000:]
     return out.stdout.strip().splitlines()
 
@@ -20,10 +19,16 @@ def test_import_enables_float64_and_nothing_else(tmp_path):
     loads JAX applies the XLA settings, and JAX makes the cache folder at its first compile."""
     home = tmp_path / "home"
     home.mkdir()
-    env = {k: v for k, v in os.environ.items()
-           if k not in ("TENSION_ZONES_CACHE", "JAX_COMPILATION_CACHE_DIR", "XDG_CACHE_HOME", "JAX_ENABLE_X64")}
-    env.update(HOME=str(home), XLA_FLAGS="--xla_force_host_platform_device_count=1",
-               PYTHONPATH=os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]))
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in ("TENSION_ZONES_CACHE", "JAX_COMPILATION_CACHE_DIR", "XDG_CACHE_HOME", "JAX_ENABLE_X64")
+    }
+    env.update(
+        HOME=str(home),
+        XLA_FLAGS="--xla_force_host_platform_device_count=1",
+        PYTHONPATH=os.pathsep.join([str(ROOT), env.get("PYTHONPATH", "")]),
+    )
     code = """
 import os
 import tension_zones
@@ -50,8 +55,10 @@ jax.jit(lambda x: jnp.sin(x) * 2.0)(jnp.arange(3.0)).block_until_ready()
 print(os.path.isdir(jax.config.jax_compilation_cache_dir))
 """
     flags, folder, before, after = _run(code, env)
-    assert flags.split() == ["--xla_force_host_platform_device_count=1",
-                             "--xla_cpu_enable_concurrency_optimized_scheduler=false"]
+    assert flags.split() == [
+        "--xla_force_host_platform_device_count=1",
+        "--xla_cpu_enable_concurrency_optimized_scheduler=false",
+    ]
     assert folder == str(home / ".cache" / "tension-zones" / "jax")
     assert (before, after) == ("False", "True")
 
@@ -63,8 +70,10 @@ _NOTEBOOK = {
     "a duration": r"\b\d+(?:\.\d+)?(?: ?[-/] ?\d+(?:\.\d+)?)? ?(?:s|ms|us|min|mins|minutes?|seconds?|hours?)\b(?![(\[_]|\.\w)",
     "a date": r"\b20\d\d-[01]\d(?:-[0-3]\d)?\b",
     "a machine": r"(?i)\bthis (?:\d+-core |shared )?machine\b|\b\d+-core\b|\blaptop\b|% CPU\b",
-    "a before/now figure": (r"(?i)\b(?:works|runs|is|as) as before\b|\bas before\b|\bwas [\d.]+.{0,40}\bnow\b"
-                            r"|\d(?: ?(?:s|mm|%|x))? ?-> ?\d|\d(?: ?(?:s|mm|us|%))? against \d|instead of \d+(?:[.,-]\d+)*\b"),
+    "a before/now figure": (
+        r"(?i)\b(?:works|runs|is|as) as before\b|\bas before\b|\bwas [\d.]+.{0,40}\bnow\b"
+        r"|\d(?: ?(?:s|mm|%|x))? ?-> ?\d|\d(?: ?(?:s|mm|us|%))? against \d|instead of \d+(?:[.,-]\d+)*\b"
+    ),
 }
 
 
@@ -91,14 +100,38 @@ def test_package_code_cites_no_timing_date_machine_or_before_and_now():
 
 
 def test_the_notebook_patterns_catch_what_they_are_for_and_not_units():
-    bad = ["took 382 s against 86 s", "12.24-12.50 s -> 10.82 s wall", "(5 s with the flag off)",
-           "a compile takes 10-15 s", "8.7 / 8.8 s", "0.3-0.5 s in every process", "about 4 min",
-           "timings, 2026-12-04", "on this 2-core machine", "Measured on this machine", "works as before",
-           "validation 5.78 -> 4.29 mm", "4-5 iterations instead of 8-9", "(one run each: 153 against 136 us)"]
-    good = ["``B`` (2S,) the bending vectors", "tau >= f_min s.t. A tau = rhs", "(N mm) for x (2S,)",
-            "a 0.4 N lateral tip force", "stiffness 60 N/mm at 4.5 mm", "q (N,) (negative = pulled in)",
-            "jaxlib 0.5.3 on", "(mm, N, rad; reported in deg)", "exp(d_k (mu_0 + mu_1 w_ki))",
-            "np.min(x)", "1 s_k of wire k", "||tau||^2 s.t. A tau", "one root instead of 2n", "before the selection is over"]
+    bad = [
+        "took 382 s against 86 s",
+        "12.24-12.50 s -> 10.82 s wall",
+        "(5 s with the flag off)",
+        "a compile takes 10-15 s",
+        "8.7 / 8.8 s",
+        "0.3-0.5 s in every process",
+        "about 4 min",
+        "timings, 2026-12-04",
+        "on this 2-core machine",
+        "Measured on this machine",
+        "works as before",
+        "validation 5.78 -> 4.29 mm",
+        "4-5 iterations instead of 8-9",
+        "(one run each: 153 against 136 us)",
+    ]
+    good = [
+        "``B`` (2S,) the bending vectors",
+        "tau >= f_min s.t. A tau = rhs",
+        "(N mm) for x (2S,)",
+        "a 0.4 N lateral tip force",
+        "stiffness 60 N/mm at 4.5 mm",
+        "q (N,) (negative = pulled in)",
+        "jaxlib 0.5.3 on",
+        "(mm, N, rad; reported in deg)",
+        "exp(d_k (mu_0 + mu_1 w_ki))",
+        "np.min(x)",
+        "1 s_k of wire k",
+        "||tau||^2 s.t. A tau",
+        "one root instead of 2n",
+        "before the selection is over",
+    ]
     flagged = _notebook_lines((Path("x.py"), i, line) for i, line in enumerate(bad + good))
     assert sorted({int(f.split(":")[1]) for f in flagged}) == list(range(len(bad))), flagged
 
@@ -130,11 +163,15 @@ def _docstrings(folder):
 def test_test_docstrings_say_what_is_tested_not_its_history():
     import re
 
-    lines = [(f"{path}:{getattr(node, 'name', '<module>')}", i, line)
-             for path, node, doc in _docstrings(ROOT / "tests") for i, line in enumerate(doc.splitlines())]
+    lines = [
+        (f"{path}:{getattr(node, 'name', '<module>')}", i, line)
+        for path, node, doc in _docstrings(ROOT / "tests")
+        for i, line in enumerate(doc.splitlines())
+    ]
     found = [f for f in _notebook_lines(lines) if ": a before/now figure:" not in f or "->" in f]
-    found += [f"{where}: {line}" for where, i, line in lines
-              if i == 0 and re.match(r"(?i)(regression|issue \d+)\b", line)]
+    found += [
+        f"{where}: {line}" for where, i, line in lines if i == 0 and re.match(r"(?i)(regression|issue \d+)\b", line)
+    ]
     assert found == []
 
 
@@ -190,8 +227,10 @@ def test_every_file_named_in_code_and_pages_exists():
                 ok = not token.endswith((".py", ".md", ".ipynb")) or token in names
             else:
                 local = token.removeprefix("ex/")
-                ok = any(p.exists() for p in (ROOT / token, ROOT / "tension_zones" / token, path.parent / token,
-                                              examples / local))
+                ok = any(
+                    p.exists()
+                    for p in (ROOT / token, ROOT / "tension_zones" / token, path.parent / token, examples / local)
+                )
             if not ok:
                 found.add(f"{path.relative_to(ROOT)}: {token}")
     assert sorted(found) == []
@@ -211,7 +250,7 @@ def _imports(path: Path, module: str) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 parts = package.split(".")
-                base = ".".join(parts[:len(parts) - node.level + 1] + ([node.module] if node.module else []))
+                base = ".".join(parts[: len(parts) - node.level + 1] + ([node.module] if node.module else []))
             elif (node.module or "").startswith("tension_zones"):
                 base = node.module
             else:
@@ -230,8 +269,10 @@ def test_no_import_cycle_between_modules():
     """Data flow one way (model -> analysis -> design, calibration -> report, plots, CLI): no module
     imports, even lazily inside a function, one that imports it back (a package's ``__init__`` aside,
     which re-exports its own modules)."""
-    files = {".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): f
-             for f in (ROOT / "tension_zones").rglob("*.py")}
+    files = {
+        ".".join(f.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): f
+        for f in (ROOT / "tension_zones").rglob("*.py")
+    }
     graph = {m: {t for t in _imports(f, m) if t in files and not m.startswith(t + ".")} for m, f in files.items()}
     cycles, state = [], {}
 
@@ -239,7 +280,7 @@ def test_no_import_cycle_between_modules():
         state[m] = 1
         for t in graph[m]:
             if state.get(t) == 1:
-                cycles.append(stack[stack.index(t):] + [t])
+                cycles.append(stack[stack.index(t) :] + [t])
             elif t not in state:
                 visit(t, stack + [t])
         state[m] = 2

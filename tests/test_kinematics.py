@@ -11,8 +11,15 @@ from hypothesis import strategies as st
 import tension_zones as tz
 
 STRAIGHT = np.pi / 2
-POSES = [(STRAIGHT, 0.3), (STRAIGHT - 1e-7, 1.2), (STRAIGHT - 1e-3, -2.0), (STRAIGHT + 1e-4, 0.7),
-         (1.0, 0.3), (0.2, 4.0), (np.radians(5.0), np.radians(187.5))]
+POSES = [
+    (STRAIGHT, 0.3),
+    (STRAIGHT - 1e-7, 1.2),
+    (STRAIGHT - 1e-3, -2.0),
+    (STRAIGHT + 1e-4, 0.7),
+    (1.0, 0.3),
+    (0.2, 4.0),
+    (np.radians(5.0), np.radians(187.5)),
+]
 
 
 def _design(n=3, angles=None):
@@ -29,8 +36,7 @@ def autodiff_twist_jacobian(design, theta_L, delta):
 @pytest.mark.parametrize("theta_L, delta", POSES)
 def test_J_xpsi_matches_jacfwd(theta_L, delta):
     d = _design()
-    np.testing.assert_allclose(tz.J_xpsi(d, theta_L, delta),
-                               autodiff_twist_jacobian(d, theta_L, delta), atol=1e-12)
+    np.testing.assert_allclose(tz.J_xpsi(d, theta_L, delta), autodiff_twist_jacobian(d, theta_L, delta), atol=1e-12)
 
 
 @given(st.floats(0.0, np.pi / 2), st.floats(-2 * np.pi, 2 * np.pi))
@@ -38,8 +44,13 @@ def test_J_xpsi_matches_finite_differences(theta_L, delta):
     d = _design()
     h = 1e-6
     p = lambda t, dd: np.asarray(tz.tip_pose(d, t, dd)[0])
-    fd = np.stack([(p(theta_L + h, delta) - p(theta_L - h, delta)) / (2 * h),
-                   (p(theta_L, delta + h) - p(theta_L, delta - h)) / (2 * h)], axis=1)
+    fd = np.stack(
+        [
+            (p(theta_L + h, delta) - p(theta_L - h, delta)) / (2 * h),
+            (p(theta_L, delta + h) - p(theta_L, delta - h)) / (2 * h),
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(tz.J_xpsi(d, theta_L, delta)[:3], fd, atol=1e-7)
 
 
@@ -48,8 +59,7 @@ def test_tip_pose_formula_and_rotation():
     phi, delta = 0.8, 0.4
     p, R = tz.tip_pose(d, np.pi / 2 - phi, delta)
     L = 20.0
-    expect = (L / phi) * np.array([np.cos(delta) * (1 - np.cos(phi)),
-                                   -np.sin(delta) * (1 - np.cos(phi)), np.sin(phi)])
+    expect = (L / phi) * np.array([np.cos(delta) * (1 - np.cos(phi)), -np.sin(delta) * (1 - np.cos(phi)), np.sin(phi)])
     np.testing.assert_allclose(p, expect, rtol=1e-13)
 
     def Rz(a):
@@ -60,8 +70,9 @@ def test_tip_pose_formula_and_rotation():
 
     np.testing.assert_allclose(R, Rz(-delta) @ Ry(phi) @ Rz(delta), atol=1e-14)
     # the tip tangent R[:, 2] is the curve's tangent dp/ds at s = L
-    np.testing.assert_allclose(R[:, 2], [np.cos(delta) * np.sin(phi), -np.sin(delta) * np.sin(phi),
-                                         np.cos(phi)], atol=1e-14)
+    np.testing.assert_allclose(
+        R[:, 2], [np.cos(delta) * np.sin(phi), -np.sin(delta) * np.sin(phi), np.cos(phi)], atol=1e-14
+    )
 
 
 def test_straight_pose_values():
@@ -144,10 +155,17 @@ def test_no_nan_at_the_straight_pose():
         th, de = x[0], x[1]
         p, R = tz.tip_pose(d, th, de)
         mask = tz.tension_mask(d, de)
-        parts = [p, R.ravel(), tz.J_xpsi(d, th, de).ravel(), tz.J_qpsi(d, th, de).ravel(),
-                 tz.J_xq(d, th, de).ravel(), tz.J_xq(d, th, de, mask).ravel(),
-                 tz.reduced_J_xq(d, th, de).ravel(), tz.wire_lengths(d, th, de),
-                 tz.tension_score(d, de, th, jnp.array([-1.0, 0.3]))]
+        parts = [
+            p,
+            R.ravel(),
+            tz.J_xpsi(d, th, de).ravel(),
+            tz.J_qpsi(d, th, de).ravel(),
+            tz.J_xq(d, th, de).ravel(),
+            tz.J_xq(d, th, de, mask).ravel(),
+            tz.reduced_J_xq(d, th, de).ravel(),
+            tz.wire_lengths(d, th, de),
+            tz.tension_score(d, de, th, jnp.array([-1.0, 0.3])),
+        ]
         return jnp.concatenate(parts)
 
     everything = jax.jit(everything)
@@ -156,8 +174,11 @@ def test_no_nan_at_the_straight_pose():
     assert np.all(np.isfinite(jax.jit(jax.jacfwd(everything))(x)))
     assert np.all(np.isfinite(jax.jit(jax.jacrev(everything))(x)))
     # second derivatives (the stiffness of the statics differentiates the Jacobians again)
-    second = jax.jit(jax.hessian(lambda x: jnp.sum(tz.J_xpsi(d, x[0], x[1]))
-                                 + jnp.sum(tz.J_xq(d, x[0], x[1], tz.tension_mask(d, x[1])))))
+    second = jax.jit(
+        jax.hessian(
+            lambda x: jnp.sum(tz.J_xpsi(d, x[0], x[1])) + jnp.sum(tz.J_xq(d, x[0], x[1], tz.tension_mask(d, x[1])))
+        )
+    )
     assert np.all(np.isfinite(second(x)))
 
     def in_b(b):
@@ -192,8 +213,7 @@ def test_pinv_tall2_matches_numpy(rng):
             J = rng.normal(size=(n, 2))
             mask = rng.integers(0, 2, size=n)
             Jm = J * mask[:, None]
-            np.testing.assert_allclose(pinv_tall2(jnp.asarray(Jm)), np.linalg.pinv(Jm),
-                                       rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(pinv_tall2(jnp.asarray(Jm)), np.linalg.pinv(Jm), rtol=1e-10, atol=1e-12)
     # exact rank one: one non-zero row
     J = np.zeros((4, 2))
     J[2] = [0.3, -1.2]

@@ -21,7 +21,8 @@ def test_rejects_non_finite_steps():
         return jnp.where(x[0] > 1.2, _exp_fit(x), jnp.nan)  # NaN "unstable" region below 1.2
 
     x, cost, it, r, J = jax.jit(lambda x0: levenberg_marquardt(res, x0, max_iter=50, tol=1e-14))(
-        jnp.asarray([5.0, 0.1]))
+        jnp.asarray([5.0, 0.1])
+    )
     np.testing.assert_allclose(np.asarray(x), [2.0, 1.5], rtol=1e-8)
     assert int(it) > 1 and float(cost) < 1e-20 and r.shape == (20, 1) and J.shape == (20, 1, 2)
 
@@ -35,8 +36,9 @@ def test_linear_least_squares_matches_numpy():
 
 def test_bounds_and_frozen_parameters():
     # the unconstrained optimum (2, 1.5) lies outside x1 <= 1: the bound holds exactly
-    x, *_ = levenberg_marquardt(_exp_fit, jnp.asarray([1.0, 0.5]), lo=jnp.asarray([0.0, 0.0]),
-                                hi=jnp.asarray([10.0, 1.0]))
+    x, *_ = levenberg_marquardt(
+        _exp_fit, jnp.asarray([1.0, 0.5]), lo=jnp.asarray([0.0, 0.0]), hi=jnp.asarray([10.0, 1.0])
+    )
     assert float(x[1]) == 1.0 and 0.0 < float(x[0]) < 10.0
     # a frozen parameter stays where it starts; the other is the conditional optimum
     x, *_ = levenberg_marquardt(_exp_fit, jnp.asarray([3.0, 1.5]), free=jnp.asarray([0.0, 1.0]))
@@ -76,7 +78,8 @@ def test_differentiating_only_the_free_columns_gives_the_same_fit():
     lo = jnp.asarray([-jnp.inf, -jnp.inf, 0.02, -jnp.inf, -jnp.inf, -jnp.inf])  # binds (free optimum 0.008)
     full = levenberg_marquardt(fun, x0, free=free, lo=lo, max_iter=30)
     some = jax.jit(lambda x, c: levenberg_marquardt(fun, x, free=free, lo=lo, max_iter=30, cols=c))(
-        x0, jnp.asarray([0, 2, 3, 3, 3]))
+        x0, jnp.asarray([0, 2, 3, 3, 3])
+    )
     np.testing.assert_allclose(some[0], full[0], rtol=1e-12, atol=1e-14)
     assert int(some[2]) == int(full[2]) and some[4].shape == (40, 1, 5)
     np.testing.assert_array_equal(np.asarray(some[0])[[1, 4, 5]], np.asarray(x0)[[1, 4, 5]])
@@ -123,8 +126,11 @@ def test_bounded_linear_least_squares_matches_scipy_in_a_few_passes():
     from scipy.optimize import lsq_linear
 
     rng = np.random.default_rng(4)
-    fit = jax.jit(lambda A, y, lo, hi: levenberg_marquardt(lambda th: A @ th - y, jnp.zeros(5), lo=lo, hi=hi,
-                                                            max_iter=40, tol=1e-12))
+    fit = jax.jit(
+        lambda A, y, lo, hi: levenberg_marquardt(
+            lambda th: A @ th - y, jnp.zeros(5), lo=lo, hi=hi, max_iter=40, tol=1e-12
+        )
+    )
     held = []
     for _ in range(5):
         A = rng.normal(size=(60, 5)) @ (np.eye(5) + 0.4 * rng.normal(size=(5, 5)))

@@ -32,9 +32,9 @@ def ref_measures(L, r, alpha, theta_L, delta, dq, reduced):
     s, c = np.sin(theta_L), np.cos(theta_L)
     A = T * c - s + 1
     sd, cd = np.sin(delta), np.cos(delta)
-    Jv = L * np.array([[cd * A / T**2, -sd * (s - 1) / T],
-                       [-sd * A / T**2, -cd * (s - 1) / T],
-                       [(T * s + c) / T**2, 0.0]])
+    Jv = L * np.array(
+        [[cd * A / T**2, -sd * (s - 1) / T], [-sd * A / T**2, -cd * (s - 1) / T], [(T * s + c) / T**2, 0.0]]
+    )
     Jw = np.array([[-sd, cd * c], [-cd, -sd * c], [0.0, -1.0 + s]])
     dk = delta + np.asarray(alpha)
     n = dk.size
@@ -73,8 +73,9 @@ def assert_matches_reference(res, design, i, j, dq, rtol=1e-9):
             got, want = float(res[f"{k}_{mode}"][i, j]), ref[k]
             # relative to the value, or to the largest singular value for a zero sigma_2 (NumPy
             # returns ~1e-17 where the closed form gives exactly 0)
-            scale = max(abs(want), SCALE.get(k, 0.0),
-                        ref[f"sigma_min_nz_{k[-1]}"] if k.startswith("sigma_min_") else 0.0)
+            scale = max(
+                abs(want), SCALE.get(k, 0.0), ref[f"sigma_min_nz_{k[-1]}"] if k.startswith("sigma_min_") else 0.0
+            )
             assert abs(got - want) <= rtol * scale, (mode, k, got, want, np.degrees(DE[j]))
 
 
@@ -98,8 +99,9 @@ def test_every_array_matches_reference_at_random_grid_points(n):
     assert all(np.all(np.isfinite(v)) for v in res.values())
 
 
-@pytest.mark.parametrize("angles", [(0.0, 80.0, 180.0, 260.0), (0.0, 50.0, 130.0, 200.0, 290.0),
-                                    (10.0, 100.0, 250.0), (0.0, 20.0, 40.0)])
+@pytest.mark.parametrize(
+    "angles", [(0.0, 80.0, 180.0, 260.0), (0.0, 50.0, 130.0, 200.0, 290.0), (10.0, 100.0, 250.0), (0.0, 20.0, 40.0)]
+)
 def test_uneven_angles_match_reference(angles):
     d, res = paper_sweep(len(angles), angles)
     rng = np.random.default_rng(len(angles))
@@ -166,8 +168,7 @@ def _measures3(d, theta_L, delta, dq, reduced):
     return _measures(d, theta_L, delta, dq, mask)
 
 
-@given(st.floats(0.0, 1.5), st.floats(0.0, 2 * np.pi), st.floats(0.01, 5.0), st.floats(0.1, 20.0),
-       st.booleans())
+@given(st.floats(0.0, 1.5), st.floats(0.0, 2 * np.pi), st.floats(0.01, 5.0), st.floats(0.1, 20.0), st.booleans())
 def test_bounds_are_linear_in_dq(theta_L, delta, dq, k, reduced):
     d = tz.Design(3, 20.0, 2.0)
     a = _measures3(d, theta_L, delta, dq, reduced)
@@ -186,15 +187,26 @@ def test_scaling_in_length_and_pitch_radius(theta_L, delta, L, r):
     a = _measures3(d0, theta_L, delta, 0.4, True)
     b = _measures3(d0.replace(length=L, pitch_radius=r), theta_L, delta, 0.4, True)
     f_v, f_w = (L / 20.0) / (r / 2.0), 1.0 / (r / 2.0)
-    for key, f in (("dp_max", f_v), ("sigma_min_v", f_v), ("sigma_min_nz_v", f_v),
-                   ("dw_max", f_w), ("sigma_min_w", f_w), ("kci_v", 1.0), ("kci_w", 1.0)):
+    for key, f in (
+        ("dp_max", f_v),
+        ("sigma_min_v", f_v),
+        ("sigma_min_nz_v", f_v),
+        ("dw_max", f_w),
+        ("sigma_min_w", f_w),
+        ("kci_v", 1.0),
+        ("kci_w", 1.0),
+    ):
         assert float(b[key]) == pytest.approx(f * float(a[key]), rel=1e-10, abs=1e-14)
     for key in ("kci_v", "kci_w"):
         assert 0.0 <= float(a[key]) <= 1.0
 
 
-@given(st.lists(st.floats(0.0, 359.0), min_size=3, max_size=3), st.floats(0.0, 1.48),
-       st.floats(0.0, 2 * np.pi), st.floats(0.05, 2.0))
+@given(
+    st.lists(st.floats(0.0, 359.0), min_size=3, max_size=3),
+    st.floats(0.0, 1.48),
+    st.floats(0.0, 2 * np.pi),
+    st.floats(0.05, 2.0),
+)
 def test_any_three_wire_layout_matches_reference(angles_deg, theta_L, delta, dq):
     """Property test over the space of three-wire layouts and poses (reduced and full)."""
     a = np.sort(np.asarray(angles_deg))
@@ -205,8 +217,11 @@ def test_any_three_wire_layout_matches_reference(angles_deg, theta_L, delta, dq)
         got = _measures3(d, theta_L, delta, dq, reduced)
         ref = ref_measures(20.0, 2.0, rad(a), theta_L, delta, dq, reduced)
         for k in MEASURES:
-            scale = max(abs(ref[k]), 1.0 if k.startswith("kci") else 0.0,
-                        ref[f"sigma_min_nz_{k[-1]}"] if k.startswith("sigma_min_") else 0.0)
+            scale = max(
+                abs(ref[k]),
+                1.0 if k.startswith("kci") else 0.0,
+                ref[f"sigma_min_nz_{k[-1]}"] if k.startswith("sigma_min_") else 0.0,
+            )
             assert abs(float(got[k]) - ref[k]) <= 1e-9 * scale, (k, reduced)
 
 
@@ -217,8 +232,7 @@ _zonogon = jax.jit(zonogon_vertices)
 _comp = st.floats(-3, 3).filter(lambda x: x == 0.0 or abs(x) > 1e-100)
 
 
-@given(st.lists(st.tuples(_comp, _comp), min_size=1, max_size=8),
-       st.sampled_from(["generic", "parallel", "zeros"]))
+@given(st.lists(st.tuples(_comp, _comp), min_size=1, max_size=8), st.sampled_from(["generic", "parallel", "zeros"]))
 def test_zonogon_vertices_equal_the_sign_vector_maximum(cols, kind):
     G = np.zeros((2, 8))  # eight generators, the unused ones zero (slack wires)
     G[:, : len(cols)] = np.array(cols, dtype=float).T
@@ -292,8 +306,7 @@ def test_gradients_match_the_scaling_laws(delta_deg):
     reverse-mode gradient, through the straight-through mask (90 deg is a four-wire zone end)."""
     r, L = 2.0, 20.0
     (_, grads), vals = _call(0.6, rad(delta_deg), r, L)
-    a = np.array([1.0 if (k.startswith("dp_") or "_v_" in k) and not k.startswith("kci") else 0.0
-                  for k in _NAMES])
+    a = np.array([1.0 if (k.startswith("dp_") or "_v_" in k) and not k.startswith("kci") else 0.0 for k in _NAMES])
     b = np.array([0.0 if k.startswith("kci") else -1.0 for k in _NAMES])
     vals = np.asarray(vals)
     assert r * float(grads[2]) == pytest.approx(float(b @ vals), rel=1e-9)
@@ -369,6 +382,7 @@ def test_many_wires_match_the_reference():
 def test_the_program_does_not_grow_with_the_wire_count(fn):
     """No per-wire unrolling above UNROLL_MAX_WIRES: the traced program of one pose has the same
     size for 16 and 64 wires (the unrolled one grows with n^2)."""
+
     def size(n):
         d = tz.Design(n, 20.0, 2.0)
 
@@ -408,8 +422,7 @@ def test_nan_inputs_give_nan_for_every_measure(n):
     for bad, value in bad_inputs.items():
         pose = {"theta_L": 0.6, "delta": 0.4, "dq": 0.4, bad.split()[-1]: value}
         args = (d, pose["theta_L"], pose["delta"], pose["dq"])
-        for out in (_metrics_jit(*args), _measures_jit(*args),
-                    _measures_jit(*args, tz.tension_mask(d, 0.4))):
+        for out in (_metrics_jit(*args), _measures_jit(*args), _measures_jit(*args, tz.tension_mask(d, 0.4))):
             assert len(out) >= len(MEASURES)
             _all_nan(out)
         if "dq" not in bad:
@@ -434,29 +447,52 @@ def test_finite_values_and_gradients_are_unchanged_by_the_nan_guard():
     d = tz.Design(4, 20.0, 2.0)
     g = jax.grad(lambda t: pose_metrics(d, t, 0.4, 0.4)["dp_max_reduced"])(0.6)
     h = 1e-6
-    fd = (pose_metrics(d, 0.6 + h, 0.4, 0.4)["dp_max_reduced"]
-          - pose_metrics(d, 0.6 - h, 0.4, 0.4)["dp_max_reduced"]) / (2 * h)
+    fd = (
+        pose_metrics(d, 0.6 + h, 0.4, 0.4)["dp_max_reduced"] - pose_metrics(d, 0.6 - h, 0.4, 0.4)["dp_max_reduced"]
+    ) / (2 * h)
     assert float(g) == pytest.approx(float(fd), rel=1e-6)
     g_mask = jax.grad(lambda e: jnp.sum(tz.tension_mask(d, e)))(0.4)  # the surrogate's gradient
     assert np.isfinite(float(g_mask)) and float(g_mask) != 0.0
 
 
-@pytest.mark.parametrize("field, value", [("length", -20.0), ("pitch_radius", -2.0),
-                                          ("pitch_radius", 0.0), ("wire_stiffness", -75.0),
-                                          ("backbone_EI", -1.0), ("preload", -1.0),
-                                          ("length", NAN), ("wire_angles", NAN)])
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("length", -20.0),
+        ("pitch_radius", -2.0),
+        ("pitch_radius", 0.0),
+        ("wire_stiffness", -75.0),
+        ("backbone_EI", -1.0),
+        ("preload", -1.0),
+        ("length", NAN),
+        ("wire_angles", NAN),
+    ],
+)
 def test_a_design_built_under_jit_with_an_invalid_value_gives_nan(field, value):
     """Design() cannot raise for traced values; the measures are NaN instead (Design docstring)."""
+
     def build(v):
-        kw = {"n_wires": 3, "length": 20.0, "pitch_radius": 2.0, "wire_stiffness": 75.0,
-              "backbone_EI": 1200.0, "preload": 0.5}
+        kw = {
+            "n_wires": 3,
+            "length": 20.0,
+            "pitch_radius": 2.0,
+            "wire_stiffness": 75.0,
+            "backbone_EI": 1200.0,
+            "preload": 0.5,
+        }
         kw[field] = jnp.full(3, v).at[1:].set(jnp.asarray([2.0, 4.0])) if field == "wire_angles" else v
         return tz.Design(**kw)
 
     metrics = jax.jit(lambda v: pose_metrics(build(v), 0.6, 0.4, 0.4))
     comp = jax.jit(lambda v: tz.compliance_pose(build(v), 0.6, 0.4, _W))
-    valid = {"length": 20.0, "pitch_radius": 2.0, "wire_stiffness": 75.0, "backbone_EI": 1200.0,
-             "preload": 0.5, "wire_angles": 0.0}[field]
+    valid = {
+        "length": 20.0,
+        "pitch_radius": 2.0,
+        "wire_stiffness": 75.0,
+        "backbone_EI": 1200.0,
+        "preload": 0.5,
+        "wire_angles": 0.0,
+    }[field]
     assert np.isfinite(float(metrics(valid)["dp_max_reduced"]))
     assert bool(jax.jit(lambda v: build(v).invalid())(value))
     assert not bool(jax.jit(lambda v: build(v).invalid())(valid))

@@ -54,9 +54,17 @@ def test_scenario_defaults_and_file(tmp_path):
 
 
 def test_geometric_radius_bounds():
-    sc = parse_scenario({"pitch_radius_mm": [0.1, 5.0],
-                         "constraints": {"outer_diameter_mm": 6.0, "wire_diameter_mm": 0.4,
-                                         "min_wall_mm": 0.3, "min_wire_gap_mm": 0.2}})
+    sc = parse_scenario(
+        {
+            "pitch_radius_mm": [0.1, 5.0],
+            "constraints": {
+                "outer_diameter_mm": 6.0,
+                "wire_diameter_mm": 0.4,
+                "min_wall_mm": 0.3,
+                "min_wire_gap_mm": 0.2,
+            },
+        }
+    )
     lo, hi = sc.r_bounds(3)
     assert hi == pytest.approx(3.0 - 0.3 - 0.2)
     assert lo == pytest.approx(0.6 / (2 * math.sin(math.pi / 3)))
@@ -65,9 +73,11 @@ def test_geometric_radius_bounds():
 
 # -- parametrisation: every variable vector gives a design that meets the constraints exactly ----
 def _sc(arc=None, **kw):
-    d = {"free_wire_angles": True, "pitch_radius_mm": [0.8, 2.5],
-         "constraints": {"wire_diameter_mm": 0.4, "min_wire_gap_mm": 0.3, "min_wall_mm": 0.2,
-                         "outer_diameter_mm": 6.0}}
+    d = {
+        "free_wire_angles": True,
+        "pitch_radius_mm": [0.8, 2.5],
+        "constraints": {"wire_diameter_mm": 0.4, "min_wire_gap_mm": 0.3, "min_wall_mm": 0.2, "outer_diameter_mm": 6.0},
+    }
     if arc is not None:
         d["forbidden_arc_deg"] = arc
     d.update(kw)
@@ -75,8 +85,14 @@ def _sc(arc=None, **kw):
 
 
 @example(6, 0.0, 0.0, 0.0, [0.0] * 9, True)  # regression: smallest radius with a forbidden arc
-@given(st.integers(3, 8), st.floats(0, 1), st.floats(0, 1), st.floats(-10, 10),
-       st.lists(st.floats(-6, 6), min_size=9, max_size=9), st.booleans())
+@given(
+    st.integers(3, 8),
+    st.floats(0, 1),
+    st.floats(0, 1),
+    st.floats(-10, 10),
+    st.lists(st.floats(-6, 6), min_size=9, max_size=9),
+    st.booleans(),
+)
 def test_parametrisation_meets_constraints(n, zr, zk, za, zg, with_arc):
     sc = _sc(arc=[150.0, 210.0] if with_arc else None)
     lo, hi = opt._r_range(sc, n)
@@ -107,8 +123,12 @@ def test_parametrisation_meets_constraints(n, zr, zk, za, zg, with_arc):
 def test_controllability_is_checked_between_grid_points():
     # four evenly spaced wires rotated so that no 10-deg grid direction hits a wire line: under the
     # strict rule still one taut wire on those lines, so still infeasible over the continuous range
-    task = {"n_wires": [4], "delta_deg": [0.0, 350.0, 10.0], "theta_L_deg": [40.0, 80.0, 40.0],
-            "weights": {"deflection": 0.0}}
+    task = {
+        "n_wires": [4],
+        "delta_deg": [0.0, 350.0, 10.0],
+        "theta_L_deg": [40.0, 80.0, 40.0],
+        "weights": {"deflection": 0.0},
+    }
     sc = parse_scenario({**task, "strict_controllability": True})
     rotated = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([5.0, 95.0, 185.0, 275.0]))
     row = opt.evaluate_design(sc, rotated)
@@ -117,13 +137,25 @@ def test_controllability_is_checked_between_grid_points():
     skew = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([2.0, 92.0, 185.0, 272.0]))
     row = opt.evaluate_design(parse_scenario(task), skew)
     assert not row["feasible"] and row["min_spread"] == 0.0 and row["spread_violations"] == 1
-    sc = parse_scenario({"n_wires": [4], "delta_deg": [0.0, 350.0, 10.0],
-                         "theta_L_deg": [40.0, 80.0, 40.0], "weights": {"deflection": 0.0}})
+    sc = parse_scenario(
+        {
+            "n_wires": [4],
+            "delta_deg": [0.0, 350.0, 10.0],
+            "theta_L_deg": [40.0, 80.0, 40.0],
+            "weights": {"deflection": 0.0},
+        }
+    )
     five = opt.evaluate_design(sc, tz.Design(5, 20.0, 2.0))
     assert five["feasible"] and five["min_spread"] > 0.5
     # a range that excludes every wire line: the four-wire design is fine there
-    sc2 = parse_scenario({"n_wires": [4], "delta_deg": [10.0, 80.0, 10.0],
-                          "theta_L_deg": [40.0, 80.0, 40.0], "weights": {"deflection": 0.0}})
+    sc2 = parse_scenario(
+        {
+            "n_wires": [4],
+            "delta_deg": [10.0, 80.0, 10.0],
+            "theta_L_deg": [40.0, 80.0, 40.0],
+            "weights": {"deflection": 0.0},
+        }
+    )
     assert opt.evaluate_design(sc2, tz.Design(4, 20.0, 2.0))["feasible"]
 
 
@@ -143,10 +175,13 @@ def test_spread_matches_svd_and_flags_one_wire():
 
 # -- optima -------------------------------------------------------------------------------------
 RESTRICTED = {
-    "n_wires": [3], "free_wire_angles": True, "pitch_radius_mm": [2.0, 2.0],
-    "wire_stiffness_N_per_mm": [75.0, 75.0], "theta_L_deg": [20.0, 80.0, 20.0],
-    "delta_deg": [-45.0, 45.0, 5.0], "weights": {"position_uncertainty": 1.0, "deflection": 0.0,
-                                                 "wire_count": 0.0},
+    "n_wires": [3],
+    "free_wire_angles": True,
+    "pitch_radius_mm": [2.0, 2.0],
+    "wire_stiffness_N_per_mm": [75.0, 75.0],
+    "theta_L_deg": [20.0, 80.0, 20.0],
+    "delta_deg": [-45.0, 45.0, 5.0],
+    "weights": {"position_uncertainty": 1.0, "deflection": 0.0, "wire_count": 0.0},
     "optimizer": {"starts": 6, "steps": 250, "learning_rate": 0.05},
 }
 
@@ -164,14 +199,14 @@ def _brute_force(sc, step_deg, centre=None, half_width=None):
     ok_gap = np.all(2 * r * np.sin(gaps / 2) >= sc.wire_diameter + sc.min_wire_gap - 1e-12, axis=1)
     A = A[ok_gap]
     task = opt._task(sc)
-    base = tz.Design(3, sc.length, r, wire_stiffness=sc.wire_stiffness[0],
-                     backbone_EI=sc.backbone_EI)
+    base = tz.Design(3, sc.length, r, wire_stiffness=sc.wire_stiffness[0], backbone_EI=sc.backbone_EI)
 
     @jax.jit
     def score(angles):
         def one(a):
             _, exact, pieces = opt._objective(base.replace(wire_angles=a), task, 3, 1.0, False)
             return exact, pieces["violations"]
+
         return jax.lax.map(one, angles, batch_size=512)
 
     exact, viol = (np.asarray(x) for x in score(jnp.asarray(A)))
@@ -196,9 +231,14 @@ def test_restricted_directions_match_brute_force_and_even_layout_is_infeasible()
     assert opt.evaluate_design(sc, d)["objective"] == pytest.approx(best["objective"], rel=1e-9)
 
 
-SMALL = {"n_wires": [3], "pitch_radius_mm": [1.0, 2.5], "wire_stiffness_N_per_mm": [55.0, 105.0],
-         "theta_L_deg": [30.0, 80.0, 25.0], "delta_deg": [0.0, 350.0, 25.0],
-         "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
+SMALL = {
+    "n_wires": [3],
+    "pitch_radius_mm": [1.0, 2.5],
+    "wire_stiffness_N_per_mm": [55.0, 105.0],
+    "theta_L_deg": [30.0, 80.0, 25.0],
+    "delta_deg": [0.0, 350.0, 25.0],
+    "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1},
+}
 
 
 @pytest.mark.slow
@@ -211,8 +251,9 @@ def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
     assert row["wire_stiffness_N_per_mm"] == pytest.approx(105.0, rel=1e-9)
     assert res["evaluations"] == 2 * 41 and len(res["history"]["3"]) == 40
     # an outer diameter that binds moves the optimum to the geometric limit
-    limited = parse_scenario({**SMALL, "constraints": {"outer_diameter_mm": 4.0,
-                                                       "wire_diameter_mm": 0.3, "min_wall_mm": 0.2}})
+    limited = parse_scenario(
+        {**SMALL, "constraints": {"outer_diameter_mm": 4.0, "wire_diameter_mm": 0.3, "min_wall_mm": 0.2}}
+    )
     (row,) = opt.optimize(limited, progress=False)["per_wire_count"]
     assert row["pitch_radius_mm"] == pytest.approx(2.0 - 0.2 - 0.15, rel=1e-9)
 
@@ -221,11 +262,18 @@ def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
 def test_new_numbers_of_the_same_shapes_do_not_recompile():
     opt.optimize(parse_scenario(SMALL), progress=False)
     before = opt._run_starts._cache_size()
-    other = {**SMALL, "length_mm": 31.0, "pitch_radius_mm": [0.9, 2.2],
-             "joint_uncertainty_mm": 0.7, "load_N": [0.0, 3.0, 1.0], "backbone_EI_Nmm2": 900.0,
-             "theta_L_deg": [35.0, 85.0, 25.0], "delta_deg": [5.0, 355.0, 25.0],
-             "weights": {"position_uncertainty": 2.0, "deflection": 0.5, "wire_count": 0.3},
-             "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.2, "seed": 5}}
+    other = {
+        **SMALL,
+        "length_mm": 31.0,
+        "pitch_radius_mm": [0.9, 2.2],
+        "joint_uncertainty_mm": 0.7,
+        "load_N": [0.0, 3.0, 1.0],
+        "backbone_EI_Nmm2": 900.0,
+        "theta_L_deg": [35.0, 85.0, 25.0],
+        "delta_deg": [5.0, 355.0, 25.0],
+        "weights": {"position_uncertainty": 2.0, "deflection": 0.5, "wire_count": 0.3},
+        "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.2, "seed": 5},
+    }
     opt.optimize(parse_scenario(other), progress=False)
     assert opt._run_starts._cache_size() == before
 
@@ -234,12 +282,17 @@ def test_new_numbers_of_the_same_shapes_do_not_recompile():
 def test_gradients_agree_with_finite_differences_away_from_switches():
     from tension_zones._numerics import frozen_masks
 
-    sc = parse_scenario({"n_wires": [4], "free_wire_angles": True,
-                         "theta_L_deg": [40.0, 70.0, 30.0], "delta_deg": [20.0, 70.0, 25.0]})
+    sc = parse_scenario(
+        {"n_wires": [4], "free_wire_angles": True, "theta_L_deg": [40.0, 70.0, 30.0], "delta_deg": [20.0, 70.0, 25.0]}
+    )
     n, task, b, base = 4, opt._task(sc), opt._bounds(sc, 4), opt._base(sc, 4)
     # wires near 0, 95, 180, 275 deg: at delta = 20..70 deg no wire is near a zone boundary
-    z = {"r": jnp.asarray(0.4), "k": jnp.asarray(0.6), "a0": jnp.asarray(0.05),
-         "gaps": jnp.asarray([0.1, -0.05, 0.08, -0.1])}
+    z = {
+        "r": jnp.asarray(0.4),
+        "k": jnp.asarray(0.6),
+        "a0": jnp.asarray(0.05),
+        "gaps": jnp.asarray([0.1, -0.05, 0.08, -0.1]),
+    }
 
     def f(z):
         return opt._objective(opt._design(z, b, n, True, False, base), task, n, 5.0, True)[0]
@@ -250,8 +303,7 @@ def test_gradients_agree_with_finite_differences_away_from_switches():
     g_st = jax.jit(lambda x: jax.grad(lambda y: f(unravel(y)))(x))(flat)
     fj = jax.jit(lambda x: f(unravel(x)))
     h = 1e-6
-    fd = np.array([(fj(flat.at[i].add(h)) - fj(flat.at[i].add(-h))) / (2 * h)
-                   for i in range(flat.size)])
+    fd = np.array([(fj(flat.at[i].add(h)) - fj(flat.at[i].add(-h))) / (2 * h) for i in range(flat.size)])
     np.testing.assert_allclose(g_exact, fd, rtol=1e-5, atol=1e-7)
     # the straight-through surrogates only add terms that are small this far from any switch
     np.testing.assert_allclose(g_st, fd, rtol=0.05, atol=0.05 * np.abs(fd).max())
@@ -300,12 +352,14 @@ def test_strict_full_circle_controllability_needs_five_wires(n, angles):
     assert float(jnp.min(jax.vmap(lambda x: opt.spread(five, x))(opt.zone_boundaries(five)))) > 0.5
 
 
-
 # -- zero width: single directions are reported, finite sectors are violations ----------
-FULL_CIRCLE = {"theta_L_deg": [30.0, 80.0, 25.0], "delta_deg": [0.0, 360.0, 10.0],
-               "pitch_radius_mm": [1.0, 2.5],
-               "weights": {"position_uncertainty": 1.0, "deflection": 0.0, "wire_count": 0.0},
-               "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1}}
+FULL_CIRCLE = {
+    "theta_L_deg": [30.0, 80.0, 25.0],
+    "delta_deg": [0.0, 360.0, 10.0],
+    "pitch_radius_mm": [1.0, 2.5],
+    "weights": {"position_uncertainty": 1.0, "deflection": 0.0, "wire_count": 0.0},
+    "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1},
+}
 
 
 @pytest.mark.slow
@@ -344,8 +398,7 @@ def test_zero_width_at_the_ends_of_a_partial_range_and_a_single_direction():
     # a task of one direction, exactly along a wire: that direction is all it needs (strict there)
     one = parse_scenario({**FULL_CIRCLE, "delta_deg": [90.0, 90.0, 10.0]})
     assert not opt.evaluate_design(one, four)["feasible"]
-    assert opt.evaluate_design(parse_scenario({**FULL_CIRCLE, "delta_deg": [45.0, 45.0, 10.0]}),
-                               four)["feasible"]
+    assert opt.evaluate_design(parse_scenario({**FULL_CIRCLE, "delta_deg": [45.0, 45.0, 10.0]}), four)["feasible"]
 
 
 _sector_min = jax.jit(lambda d, task: jnp.min(opt._sector_spread(d, task)))

@@ -71,13 +71,11 @@ def test_tensions_only_three_segments_compose_constant_curvature_arcs():
     angles = [R3 + 0.1, R3 + 0.9, R3 - 0.4]
     taus = [np.array([1.0, 0.0, 0.3]), np.array([0.0, 0.8, 0.0]), np.array([0.2, 0.0, 0.6])]
     radii = [4.5, 4.0, 3.5]
-    segs = [rr.Segment(lj, e, tuple(a), rj, tuple(t)) for lj, e, a, rj, t in
-            zip(lengths, eis, angles, radii, taus)]
+    segs = [rr.Segment(lj, e, tuple(a), rj, tuple(t)) for lj, e, a, rj, t in zip(lengths, eis, angles, radii, taus)]
     sol = rr.solve_rod(segs)
     T = np.eye(4)
     for i in range(3):
-        mom = sum((taus[j] * radii[j]) @ np.stack([np.cos(angles[j]), np.sin(angles[j])], 1)
-                  for j in range(i, 3))
+        mom = sum((taus[j] * radii[j]) @ np.stack([np.cos(angles[j]), np.sin(angles[j])], 1) for j in range(i, 3))
         kv = mom / eis[i]
         p, Ri = rr.constant_curvature_tip(lengths[i], np.hypot(*kv) * lengths[i], np.arctan2(*kv[::-1]))
         Ti = np.eye(4)
@@ -98,11 +96,13 @@ def test_small_tip_force_matches_euler_bernoulli():
     e = np.array([np.cos(0.5), np.sin(0.5), 0.0])  # any transverse direction
     sol = rr.solve_segment(L, EI, [], 0.0, [], tip_force=F * e, tol=1e-10)
     # transverse d, axial foreshortening int (w')^2 / 2 = 3 d^2 / (5 L)
-    np.testing.assert_allclose(sol.tip_position, (L - 0.6 * d**2 / L) * np.array([0, 0, 1]) + d * e,
-                               rtol=0, atol=1e-6 * d)
+    np.testing.assert_allclose(
+        sol.tip_position, (L - 0.6 * d**2 / L) * np.array([0, 0, 1]) + d * e, rtol=0, atol=1e-6 * d
+    )
     # tip slope F L^2 / (2 EI) about the axis z x e
-    np.testing.assert_allclose(rotvec(sol.tip_rotation), F * L**2 / (2 * EI) * np.cross([0, 0, 1], e),
-                               rtol=1e-6, atol=1e-15)
+    np.testing.assert_allclose(
+        rotvec(sol.tip_rotation), F * L**2 / (2 * EI) * np.cross([0, 0, 1], e), rtol=1e-6, atol=1e-15
+    )
 
 
 def elastica_cantilever(alpha):
@@ -120,8 +120,7 @@ def elastica_cantilever(alpha):
 
         return quad(h, 0.0, 1.0, epsabs=1e-13, epsrel=1e-11, limit=200)[0]
 
-    th0 = brentq(lambda t: integral(lambda th: 1.0, t) - np.sqrt(2 * alpha), 1e-9, np.pi / 2 - 1e-6,
-                 xtol=1e-15)
+    th0 = brentq(lambda t: integral(lambda th: 1.0, t) - np.sqrt(2 * alpha), 1e-9, np.pi / 2 - 1e-6, xtol=1e-15)
     y = integral(np.sin, th0) / np.sqrt(2 * alpha)
     x = integral(np.cos, th0) / np.sqrt(2 * alpha)
     assert np.isclose(x, np.sqrt(2 * np.sin(th0) / alpha), rtol=1e-10)
@@ -147,15 +146,13 @@ def test_small_uniform_weight_matches_euler_bernoulli():
     w = 8 * EI * d / L**4
     sol = rr.solve_segment(L, EI, [], 0.0, [], weight=(0.0, -w, 0.0), tol=1e-10)
     # axial foreshortening int (w')^2 / 2 = 4 d^2 / (7 L)
-    np.testing.assert_allclose(sol.tip_position, [0.0, -d, L - 4 * d**2 / (7 * L)], rtol=0,
-                               atol=1e-6 * d)
+    np.testing.assert_allclose(sol.tip_position, [0.0, -d, L - 4 * d**2 / (7 * L)], rtol=0, atol=1e-6 * d)
     # tip slope w L^3 / (6 EI) and base moment w L^2 / 2 (about -x: the load is along -y)
     np.testing.assert_allclose(rotvec(sol.tip_rotation), [w * L**3 / (6 * EI), 0, 0], rtol=1e-6)
     np.testing.assert_allclose(sol.M[0], [w * L**2 / 2, 0, 0], rtol=1e-6)
     # superposition with a small tip force
     F = 3 * EI * d / L**3
-    both = rr.solve_segment(L, EI, [], 0.0, [], weight=(0.0, -w, 0.0), tip_force=(0.0, -F, 0.0),
-                            tol=1e-10)
+    both = rr.solve_segment(L, EI, [], 0.0, [], weight=(0.0, -w, 0.0), tip_force=(0.0, -F, 0.0), tol=1e-10)
     assert abs(both.tip_position[1] + 2 * d) < 1e-5 * d
 
 
@@ -242,8 +239,13 @@ def test_tendon_termination_loads_at_the_disks(loaded3):
     "lengths, eis, taus, g, F",
     [
         ([60.0], [EI], [(2.0, 0.0)], (-4e-3, -3e-3), (0.3, -0.1)),
-        ([60.0, 62.5, 64.0], [EI, 1.3 * EI, 0.7 * EI], [(0.0, 0.6), (0.8, 0.0), (0.5, 0.0)],
-         (3.5e-3, 0.0), (0.0, 0.05)),
+        (
+            [60.0, 62.5, 64.0],
+            [EI, 1.3 * EI, 0.7 * EI],
+            [(0.0, 0.6), (0.8, 0.0), (0.5, 0.0)],
+            (3.5e-3, 0.0),
+            (0.0, 0.05),
+        ),
     ],
 )
 def test_planar_loads_agree_with_shooting(lengths, eis, taus, g, F):
@@ -258,8 +260,7 @@ def test_planar_loads_agree_with_shooting(lengths, eis, taus, g, F):
     assert abs(th) > 0.3  # a large deflection
     # planar: no twist, so the full and the point tendon models coincide
     if len(segs) == 1:
-        pt = rr.solve_rod(segs, weight=(g[0], 0.0, g[1]), tip_force=(F[0], 0.0, F[1]),
-                          tendons="point")
+        pt = rr.solve_rod(segs, weight=(g[0], 0.0, g[1]), tip_force=(F[0], 0.0, F[1]), tendons="point")
         np.testing.assert_allclose(pt.tip_position, sol.tip_position, atol=1e-9)
 
 
@@ -270,8 +271,16 @@ def test_rotating_the_problem_about_the_base_axis_rotates_the_solution():
     def solve(psi):
         c, s = np.cos(psi), np.sin(psi)
         Rz = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-        sol = rr.solve_segment(L, EI, R3 + psi, 4.5, [2.0, 0.0, 0.5], weight=Rz @ [0.0, 3e-3, -2e-3],
-                               tip_force=Rz @ [0.1, 0.0, 0.0], tol=1e-9)
+        sol = rr.solve_segment(
+            L,
+            EI,
+            R3 + psi,
+            4.5,
+            [2.0, 0.0, 0.5],
+            weight=Rz @ [0.0, 3e-3, -2e-3],
+            tip_force=Rz @ [0.1, 0.0, 0.0],
+            tol=1e-9,
+        )
         return sol, Rz
 
     s0, _ = solve(0.0)
@@ -280,6 +289,7 @@ def test_rotating_the_problem_about_the_base_axis_rotates_the_solution():
     np.testing.assert_allclose(s1.tip_rotation, Rz @ s0.tip_rotation @ Rz.T, atol=1e-9)
     # out-of-plane loads twist the segment; the tendons' tension stiffens the twist
     # (torsional stiffness GJ + sum tau rho^2 in the full model)
-    pt = rr.solve_segment(L, EI, R3, 4.5, [2.0, 0.0, 0.5], weight=[0.0, 3e-3, -2e-3],
-                          tip_force=[0.1, 0.0, 0.0], tol=1e-9, tendons="point")
+    pt = rr.solve_segment(
+        L, EI, R3, 4.5, [2.0, 0.0, 0.5], weight=[0.0, 3e-3, -2e-3], tip_force=[0.1, 0.0, 0.0], tol=1e-9, tendons="point"
+    )
     assert 0 < np.max(np.abs(s0.u[:, 2])) < np.max(np.abs(pt.u[:, 2]))

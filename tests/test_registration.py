@@ -22,7 +22,8 @@ from tension_zones.calibration._register import kabsch, rotation_vector
 from tension_zones.calibration.effects import library, nominal
 
 rotvecs = st.tuples(*[st.floats(-1.0, 1.0)] * 3, st.floats(0.0, np.pi)).map(
-    lambda a: np.array(a[:3]) / max(np.linalg.norm(a[:3]), 1e-9) * a[3])
+    lambda a: np.array(a[:3]) / max(np.linalg.norm(a[:3]), 1e-9) * a[3]
+)
 shifts = st.tuples(*[st.floats(-500.0, 500.0)] * 3).map(np.array)
 
 
@@ -47,7 +48,9 @@ def test_rotation_vector_matches_scipy(w):
     Q = Rotation.from_rotvec(w).as_matrix()
     np.testing.assert_allclose(rotvec_to_matrix(w), Q, atol=1e-12)
     np.testing.assert_allclose(rotvec_to_matrix(rotation_vector(Q)), Q, atol=1e-12)
-    np.testing.assert_allclose(rotation_vector(np.stack([Q, Q.T])), np.stack([rotation_vector(Q), rotation_vector(Q.T)]))
+    np.testing.assert_allclose(
+        rotation_vector(np.stack([Q, Q.T])), np.stack([rotation_vector(Q), rotation_vector(Q.T)])
+    )
     if np.linalg.norm(w) < np.pi - 1e-6:
         np.testing.assert_allclose(rotation_vector(Q), Rotation.from_matrix(Q).as_rotvec(), atol=1e-9)
 
@@ -56,8 +59,9 @@ def test_rotation_vector_matches_scipy(w):
 def tracker_set(tmp_path_factory):
     """A two-segment robot with backlash, in a tracker frame (the generator's), training and validation."""
     folder = tmp_path_factory.mktemp("reg")
-    train, val, design = write_robot_set(folder, "bl", RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)),
-                                        seed=3, steps=8)
+    train, val, design = write_robot_set(
+        folder, "bl", RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)), seed=3, steps=8
+    )
     robot = tz.Robot.from_json(design)
     tr = read_opencr(train, n_wires=robot.n_wires)
     return robot, tr, read_opencr(val, n_wires=robot.n_wires, servo_ids=tr.servo_ids)
@@ -90,12 +94,14 @@ def test_a_calibration_is_the_same_in_any_tracker_frame(tracker_set):
     assert [e["name"] for e in a["effects"]] == [e["name"] for e in b["effects"]] == ["backlash"]
     for k in ("rmse_before_mm", "rmse_after_mm", "rmse_validate_mm"):
         assert abs(a[k] - b[k]) < 1e-6, k
-    np.testing.assert_allclose(a["effects"][0]["params"]["play_1_mm"], b["effects"][0]["params"]["play_1_mm"],
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        a["effects"][0]["params"]["play_1_mm"], b["effects"][0]["params"]["play_1_mm"], atol=1e-6
+    )
     # the frame found moves with the tracker; the parameters in the robot's frame stay
     np.testing.assert_allclose(b["measurement_frame"]["axis"], Q @ np.array(a["measurement_frame"]["axis"]), atol=1e-6)
-    np.testing.assert_allclose(b["measurement_frame"]["translation_mm"],
-                               Q @ np.array(a["measurement_frame"]["translation_mm"]) + s, atol=1e-5)
+    np.testing.assert_allclose(
+        b["measurement_frame"]["translation_mm"], Q @ np.array(a["measurement_frame"]["translation_mm"]) + s, atol=1e-5
+    )
     assert a["rmse_validate_mm"] < 1.3 * a["noise_floor_mm"]
 
 
@@ -114,22 +120,57 @@ def test_a_base_frame_recording_far_from_the_base_is_registered():
 
 
 def test_knife_edges_name_the_decision_and_the_other_side():
-    tried = [{"name": "drift", "accepted": False, "significant": False, "short_of_share": True, "sse_drop": 90.0,
-              "sse_drop_train": 50.0, "needed": 10.8, "share_held_out": 0.1110, "share_needed": 0.1130,
-              "rmse_held_out_mm": 3.4},
-             {"name": "marker", "accepted": False, "significant": False, "short_of_share": False, "sse_drop": 5.0,
-              "sse_drop_train": 5.0, "needed": 16.3, "share_held_out": 0.01, "share_needed": 0.113,
-              "rmse_held_out_mm": 3.6}]
-    rounds = [{"round": 5, "rmse_held_out_mm": 3.66, "tried": tried,
-               "joint_look": {"added": ["geometry", "preload"], "share_held_out": 0.2488, "share_needed": 0.25,
-                              "sse_drop": 400.0, "needed": 20.0, "kept": False, "rmse_held_out_mm": 7.91,
-                              "rmse_before_mm": 9.11}}]
+    tried = [
+        {
+            "name": "drift",
+            "accepted": False,
+            "significant": False,
+            "short_of_share": True,
+            "sse_drop": 90.0,
+            "sse_drop_train": 50.0,
+            "needed": 10.8,
+            "share_held_out": 0.1110,
+            "share_needed": 0.1130,
+            "rmse_held_out_mm": 3.4,
+        },
+        {
+            "name": "marker",
+            "accepted": False,
+            "significant": False,
+            "short_of_share": False,
+            "sse_drop": 5.0,
+            "sse_drop_train": 5.0,
+            "needed": 16.3,
+            "share_held_out": 0.01,
+            "share_needed": 0.113,
+            "rmse_held_out_mm": 3.6,
+        },
+    ]
+    rounds = [
+        {
+            "round": 5,
+            "rmse_held_out_mm": 3.66,
+            "tried": tried,
+            "joint_look": {
+                "added": ["geometry", "preload"],
+                "share_held_out": 0.2488,
+                "share_needed": 0.25,
+                "sse_drop": 400.0,
+                "needed": 20.0,
+                "kept": False,
+                "rmse_held_out_mm": 7.91,
+                "rmse_before_mm": 9.11,
+            },
+        }
+    ]
     edges = knife_edges(rounds)
-    assert [(e["what"], e["test"]) for e in edges] == [("refit with drift", "share of the excess"),
-                                                         ("joint look (geometry + preload)", "share of the excess")]
+    assert [(e["what"], e["test"]) for e in edges] == [
+        ("refit with drift", "share of the excess"),
+        ("joint look (geometry + preload)", "share of the excess"),
+    ]
     assert edges[0]["other_side_rmse_mm"] == 3.4 and edges[1]["other_side_rmse_mm"] == 7.91
     lines = caveats({"knife_edges": edges, "bound_warnings": ["x"]})
     assert len(lines) == 3 and "0.2488 against 0.25" in lines[1] and "7.910 mm" in lines[1]
-    assert bound_lines(["backbone_EI.EI_1_Nmm2"], {"backbone_EI": {"EI_1_Nmm2": 9818.0}},
-                       {"backbone_EI": {"EI_1_Nmm2": 490.9}}) == [
-        "backbone_EI.EI_1_Nmm2 at its bound (9818, 20x the declared 490.9): check the design file's value"]
+    assert bound_lines(
+        ["backbone_EI.EI_1_Nmm2"], {"backbone_EI": {"EI_1_Nmm2": 9818.0}}, {"backbone_EI": {"EI_1_Nmm2": 490.9}}
+    ) == ["backbone_EI.EI_1_Nmm2 at its bound (9818, 20x the declared 490.9): check the design file's value"]

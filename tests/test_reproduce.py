@@ -36,8 +36,14 @@ def test_readme_example_runs_from_an_empty_folder(tmp_path):
     text = (ROOT / "README.md").read_text()
     code = text.split("## Ten lines of Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     assert 8 <= len(code.strip().splitlines()) <= 12
-    r = subprocess.run([sys.executable, "-c", code + "\nassert res.effects[0]['name'] == 'backlash'"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=600, check=False)
+    r = subprocess.run(
+        [sys.executable, "-c", code + "\nassert res.effects[0]['name'] == 'backlash'"],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+    )
     assert r.returncode == 0, r.stderr[-3000:]
     assert "taut" in r.stdout and "backlash" in r.stdout
 
@@ -56,8 +62,12 @@ def test_reproduce_writes_figures_and_summary(tmp_path):
     ident = comp["identified"]
     assert 10 <= ident["length_mm"] <= 40 and 1 <= ident["pitch_radius_mm"] <= 3
     assert 10 <= ident["backbone_EI_Nmm2"] <= 5000
-    errs = [abs(comp["table"][str(n)][str(k)][i] / PAPER_TABLE[n][k][i] - 1)
-            for n in (3, 4) for k in (55, 75, 105) for i in (0, 2)]
+    errs = [
+        abs(comp["table"][str(n)][str(k)][i] / PAPER_TABLE[n][k][i] - 1)
+        for n in (3, 4)
+        for k in (55, 75, 105)
+        for i in (0, 2)
+    ]
     assert len(errs) == 12 and sum(errs) / 12 <= 0.10
     assert comp["reduced_over_traditional_position_mean"]["3"] >= 2.5
     assert (tmp_path / "fig13_compliance.png").stat().st_size > 10_000

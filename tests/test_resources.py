@@ -17,8 +17,13 @@ from tension_zones import _io, _resources
 from tension_zones.cli import main
 
 ROOT = Path(__file__).parents[1]
-SPACE = {"n_wires": [3], "pitch_radius_mm": [1.0, 2.0], "sample": {"method": "grid", "points": 2},
-         "theta_L_deg": [10, 80, 35], "delta_deg": [0, 300, 60]}
+SPACE = {
+    "n_wires": [3],
+    "pitch_radius_mm": [1.0, 2.0],
+    "sample": {"method": "grid", "points": 2},
+    "theta_L_deg": [10, 80, 35],
+    "delta_deg": [0, 300, 60],
+}
 
 
 def _one_line(capsys, rc, code=2):
@@ -35,9 +40,11 @@ def test_calibrate_beyond_the_machines_memory_is_refused_up_front(tmp_path, caps
     design = str(tz.example_path("synthetic/nominal_3w.design.json"))
     argv = ["calibrate", str(tmp_path / "cal.csv"), "--design", design, "--out", str(tmp_path / "o"), "--workers", "0"]
     err = _one_line(capsys, main(argv))
-    assert ("calibrating 400 samples x 1 segment(s) needs about 800 MB of memory (estimated), more than 50% of "
-            "the 1.6 GB of memory here; pass --subsample 2 (one sample in 2, in acquisition order) or --force to run "
-            "it anyway") in err, err
+    assert (
+        "calibrating 400 samples x 1 segment(s) needs about 800 MB of memory (estimated), more than 50% of "
+        "the 1.6 GB of memory here; pass --subsample 2 (one sample in 2, in acquisition order) or --force to run "
+        "it anyway"
+    ) in err, err
     assert not (tmp_path / "o").exists()
     err = _one_line(capsys, main(argv + ["--subsample", "0"]))
     assert "--subsample must be 1 or more, got 0" in err
@@ -74,12 +81,29 @@ def test_a_coordinator_that_does_not_answer_is_one_line(tmp_path, capsys):
     space = tmp_path / "space.json"
     space.write_text(json.dumps(SPACE))
     t0 = time.monotonic()
-    rc = main(["explore", "--space", str(space), "--out", str(tmp_path / "o"), "--coordinator", "127.0.0.1:1",
-               "--num-processes", "2", "--process-id", "1", "--coordinator-timeout", "0.5"])
+    rc = main(
+        [
+            "explore",
+            "--space",
+            str(space),
+            "--out",
+            str(tmp_path / "o"),
+            "--coordinator",
+            "127.0.0.1:1",
+            "--num-processes",
+            "2",
+            "--process-id",
+            "1",
+            "--coordinator-timeout",
+            "0.5",
+        ]
+    )
     err = _one_line(capsys, rc)
     assert time.monotonic() - t0 < 5
-    assert ("--coordinator 127.0.0.1:1 did not answer within 0.5 s (Connection refused); start process 0 first, "
-            "check the address, or raise --coordinator-timeout") in err, err
+    assert (
+        "--coordinator 127.0.0.1:1 did not answer within 0.5 s (Connection refused); start process 0 first, "
+        "check the address, or raise --coordinator-timeout"
+    ) in err, err
     assert not (tmp_path / "o").exists()
 
 
@@ -88,12 +112,33 @@ def test_ctrl_c_stops_a_long_optimize_within_seconds(tmp_path):
     """A compiled loop of 10^8 steps does not return to Python: the watchdog ends it, status 130, one
     line, no result folder."""
     scenario = tmp_path / "long.json"
-    scenario.write_text(json.dumps({"n_wires": [3], "theta_L_deg": [30, 80, 50], "delta_deg": [0, 350, 50],
-                                    "optimizer": {"starts": 1, "steps": 10**8}}))
+    scenario.write_text(
+        json.dumps(
+            {
+                "n_wires": [3],
+                "theta_L_deg": [30, 80, 50],
+                "delta_deg": [0, 350, 50],
+                "optimizer": {"starts": 1, "steps": 10**8},
+            }
+        )
+    )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    p = subprocess.Popen([sys.executable, "-m", "tension_zones.cli", "optimize", "--scenario", str(scenario),
-                          "--out", str(tmp_path / "o")], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "tension_zones.cli",
+            "optimize",
+            "--scenario",
+            str(scenario),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     seen = ""
     while "wire counts" not in seen:  # the progress bar: the command is running
         seen += p.stderr.read(1) or pytest.fail(f"ended before its progress bar: {seen}")

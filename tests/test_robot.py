@@ -15,14 +15,37 @@ DEG = np.pi / 180
 
 
 def three_segments(k_w=60.0, preload=0.0):
-    return ms.Robot([
-        tz.Design(3, 60.0, 4.5, wire_angles=np.radians([10, 130, 250]), backbone_EI=2400.0,
-                  wire_stiffness=k_w, preload=preload),
-        tz.Design(4, 62.5, 4.0, wire_angles=np.radians([40, 125, 220, 310]), backbone_EI=2000.0,
-                  wire_stiffness=k_w, preload=preload),
-        tz.Design(3, 64.0, 3.5, wire_angles=np.radians([80, 200, 320]), backbone_EI=1500.0,
-                  wire_stiffness=k_w, preload=preload),
-    ])
+    return ms.Robot(
+        [
+            tz.Design(
+                3,
+                60.0,
+                4.5,
+                wire_angles=np.radians([10, 130, 250]),
+                backbone_EI=2400.0,
+                wire_stiffness=k_w,
+                preload=preload,
+            ),
+            tz.Design(
+                4,
+                62.5,
+                4.0,
+                wire_angles=np.radians([40, 125, 220, 310]),
+                backbone_EI=2000.0,
+                wire_stiffness=k_w,
+                preload=preload,
+            ),
+            tz.Design(
+                3,
+                64.0,
+                3.5,
+                wire_angles=np.radians([80, 200, 320]),
+                backbone_EI=1500.0,
+                wire_stiffness=k_w,
+                preload=preload,
+            ),
+        ]
+    )
 
 
 EQ = jax.jit(ms.equilibrium)
@@ -68,19 +91,21 @@ def _single_equilibrium_reference(d, q, f):
     def V(b):
         u, v = b
         phi = max(np.hypot(u, v), 1e-12)
-        p = np.array([L * (1 - np.cos(phi)) / phi**2 * u, L * (1 - np.cos(phi)) / phi**2 * v,
-                      L * np.sin(phi) / phi])
+        p = np.array([L * (1 - np.cos(phi)) / phi**2 * u, L * (1 - np.cos(phi)) / phi**2 * v, L * np.sin(phi) / phi])
         s = -r * (u * np.cos(a) + v * np.sin(a)) - q + pre / kw
         return EI * (u * u + v * v) / (2 * L) + 0.5 * kw * np.sum(np.maximum(s, 0) ** 2) - f @ p
 
     return minimize(V, np.array([0.1, 0.1]), method="BFGS", options={"gtol": 1e-10}).x
 
 
-@pytest.mark.parametrize("q, f", [
-    (np.array([-0.8, 0.3, 0.4]), np.zeros(3)),
-    (np.array([-0.2, -0.5, 0.6]), np.array([0.3, -0.2, 0.0])),
-    (np.array([0.1, 0.1, 0.1]), np.zeros(3)),
-])
+@pytest.mark.parametrize(
+    "q, f",
+    [
+        (np.array([-0.8, 0.3, 0.4]), np.zeros(3)),
+        (np.array([-0.2, -0.5, 0.6]), np.array([0.3, -0.2, 0.0])),
+        (np.array([0.1, 0.1, 0.1]), np.zeros(3)),
+    ],
+)
 def test_single_segment_equilibrium_matches_independent_solver(q, f):
     d = tz.Design(3, 20.0, 2.0, wire_stiffness=70.0, backbone_EI=1200.0, preload=1.0)
     B = EQ(ms.Robot(d), q, ms.Load(f, np.zeros(3)))
@@ -91,8 +116,15 @@ def test_robot_from_dict_single_and_multi(tmp_path):
     single = {"n_wires": 3, "length_mm": 20.0, "pitch_radius_mm": 2.0}
     rob = ms.Robot.from_dict(single)
     assert rob.n_segments == 1 and rob.n_wires == 3
-    seg = {"length_mm": 60.0, "n_wires": 3, "pitch_radius_mm": 4.5, "wire_angles_deg": [0, 120, 240],
-               "backbone_EI_Nmm2": 2454.0, "wire_stiffness_N_per_mm": 50.0, "preload_N": 0.5}
+    seg = {
+        "length_mm": 60.0,
+        "n_wires": 3,
+        "pitch_radius_mm": 4.5,
+        "wire_angles_deg": [0, 120, 240],
+        "backbone_EI_Nmm2": 2454.0,
+        "wire_stiffness_N_per_mm": 50.0,
+        "preload_N": 0.5,
+    }
     rob3 = ms.Robot.from_dict({"segments": [seg, dict(seg, length_mm=62.5), dict(seg, length_mm=64.0)]})
     assert rob3.n_wires_per_segment == (3, 3, 3)
     np.testing.assert_allclose(rob3.lengths, [60.0, 62.5, 64.0])
@@ -101,8 +133,7 @@ def test_robot_from_dict_single_and_multi(tmp_path):
         ms.Robot.from_dict({"segments": [seg, dict(seg, pitch_radius_mm=-1.0)]})
     with pytest.raises(ValueError, match="unknown robot design key"):
         ms.Robot.from_dict({"segments": [seg], "twist": 1})
-    example = ms.Robot.from_json(
-        tz.example_path("ftdcr_v4/design.json"))
+    example = ms.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
     assert example.n_wires_per_segment == (3, 3, 3)
     np.testing.assert_allclose(float(jnp.sum(example.lengths)), 186.5)
 
@@ -119,8 +150,9 @@ def _segment_frame(L, b, s):
         return np.array([0.0, 0.0, s]), rot.as_matrix()
     rho = s / phi
     sig = np.arctan2(v, u)
-    return np.array([rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig),
-                     rho * np.sin(phi)]), rot.as_matrix()
+    return np.array(
+        [rho * (1 - np.cos(phi)) * np.cos(sig), rho * (1 - np.cos(phi)) * np.sin(sig), rho * np.sin(phi)]
+    ), rot.as_matrix()
 
 
 def _integrated_wire_length(rob, B, k, n=400):
@@ -192,8 +224,7 @@ def test_J_qB_and_J_xB_match_finite_differences():
     for i in range(6):
         e = np.zeros(6)
         e[i] = h
-        dR = (np.asarray(tip(rob, (x + e).reshape(3, 2))[1])
-              - np.asarray(tip(rob, (x - e).reshape(3, 2))[1])) / (2 * h)
+        dR = (np.asarray(tip(rob, (x + e).reshape(3, 2))[1]) - np.asarray(tip(rob, (x - e).reshape(3, 2))[1])) / (2 * h)
         W = dR @ R0.T
         np.testing.assert_allclose(Jx[3:, i], [W[2, 1], W[0, 2], W[1, 0]], atol=1e-6)
 
@@ -274,6 +305,7 @@ def test_equilibrium_derivatives_match_finite_differences():
     rob = three_segments(preload=0.5)
     q = jnp.asarray(Q_CASES[0])
     _assert_J_PQ_matches_fd(rob, q, None, h=1e-6, atol=1e-5)
+
     # reverse mode through the implicit rule, in a robot parameter
     @jax.jit
     def tip_x(ei):
@@ -334,14 +366,16 @@ def test_load_jacobians_and_chain_tip_derivative_are_exact(x):
     L = jnp.asarray([60.0, 62.5, 64.0])
     f, g = jnp.asarray([0.3, -0.2, 0.5]), jnp.asarray([1e-3, 2e-3, -4e-3])
     x = jnp.asarray(x)
-    np.testing.assert_allclose(E.load_gradient(L, x, f, g), jax.grad(E.load_potential, argnums=1)(L, x, f, g),
-                               atol=1e-10)
+    np.testing.assert_allclose(
+        E.load_gradient(L, x, f, g), jax.grad(E.load_potential, argnums=1)(L, x, f, g), atol=1e-10
+    )
     # the custom derivative of the tip against forward mode through the plain chain, in B and L
     plain = lambda LL, xx: chain_poses(LL, xx.reshape(3, 2))[0][-1]
     fast = lambda LL, xx: chain_tip(LL, xx.reshape(3, 2))[0]
     for arg in (0, 1):
-        np.testing.assert_allclose(jax.jacfwd(fast, argnums=arg)(L, x), jax.jacfwd(plain, argnums=arg)(L, x),
-                                   atol=1e-10)
+        np.testing.assert_allclose(
+            jax.jacfwd(fast, argnums=arg)(L, x), jax.jacfwd(plain, argnums=arg)(L, x), atol=1e-10
+        )
     Rp = jax.jacfwd(lambda xx: chain_poses(L, xx.reshape(3, 2))[1][-1])(x)
     Rf = jax.jacfwd(lambda xx: chain_tip(L, xx.reshape(3, 2))[1])(x)
     np.testing.assert_allclose(Rf, Rp, atol=1e-10)
@@ -371,8 +405,17 @@ def test_long_chains_as_a_scan_equal_the_unrolled_chain(monkeypatch):
 
 def test_declared_routing_is_read_and_written(tmp_path):
     seg = {"length_mm": 40.0, "n_wires": 3, "pitch_radius_mm": 3.0}
-    d = {"segments": [seg, dict(seg, wire_angles_deg=[30.0, 150.0, 270.0],
-                                route_angles_deg=[[35.0], [155.0], [275.0]], route_radii_mm=[[4.0], [4.0], [4.0]])]}
+    d = {
+        "segments": [
+            seg,
+            dict(
+                seg,
+                wire_angles_deg=[30.0, 150.0, 270.0],
+                route_angles_deg=[[35.0], [155.0], [275.0]],
+                route_radii_mm=[[4.0], [4.0], [4.0]],
+            ),
+        ]
+    }
     rob = ms.Robot.from_dict(d)
     np.testing.assert_allclose(np.degrees(rob.route_angles[3:, 0]), [35.0, 155.0, 275.0])
     np.testing.assert_allclose(rob.route_radii[3:, 0], 4.0)
@@ -432,7 +475,9 @@ def test_clearance_equilibrium_matches_an_independent_root_and_its_derivatives_a
     B = np.asarray(jax.jit(_clearance_solve)(rob, q, c)).reshape(-1)
     A = np.asarray(rob.J_qB())
     owner = np.repeat(np.arange(3), rob.n_wires_per_segment)
-    C = np.where(np.arange(3)[None, :] == owner[:, None], 0.1, np.where(np.arange(3)[None, :] < owner[:, None], 0.3, 0.0))
+    C = np.where(
+        np.arange(3)[None, :] == owner[:, None], 0.1, np.where(np.arange(3)[None, :] < owner[:, None], 0.3, 0.0)
+    )
     k, pre = np.asarray(rob.wire_stiffness), np.asarray(rob.preload)
     Ek = np.repeat(np.asarray(rob.backbone_EI) / np.asarray(rob.lengths), 2)
 
@@ -493,10 +538,14 @@ def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():
     Hessian at the straight start has a negative eigenvalue. The solve must still reach a stationary
     point that is a minimum (a Newton step on that Hessian would be near-infinite and stay at the
     start)."""
-    rob = ms.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), backbone_EI=1800.0,
-                              wire_stiffness=30.0),
-                    tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), backbone_EI=2400.0,
-                              wire_stiffness=80.0)])
+    rob = ms.Robot(
+        [
+            tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), backbone_EI=1800.0, wire_stiffness=30.0),
+            tz.Design(
+                4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), backbone_EI=2400.0, wire_stiffness=80.0
+            ),
+        ]
+    )
     q = jnp.asarray([0.8, 0.8, -2.0, 0.8, 0.8, 0.8, 0.8])
     load = ms.Load(jnp.asarray([0.3, -0.2, -0.4]), jnp.zeros(3))
     x = np.asarray(EQ(rob, q, load)).reshape(-1)
@@ -505,8 +554,13 @@ def test_loaded_equilibrium_from_an_unstable_start_reaches_a_minimum():
     np.testing.assert_allclose(G(jnp.asarray(x)), 0.0, atol=1e-8)
     rng = np.random.default_rng(0)
     assert all(float(V(jnp.asarray(x + 1e-3 * rng.normal(size=4)))) > float(V(jnp.asarray(x))) for _ in range(20))
-    ref = minimize(lambda y: float(V(jnp.asarray(y))), np.zeros(4), jac=lambda y: np.asarray(G(jnp.asarray(y))),
-                   method="BFGS", options={"gtol": 1e-10})
+    ref = minimize(
+        lambda y: float(V(jnp.asarray(y))),
+        np.zeros(4),
+        jac=lambda y: np.asarray(G(jnp.asarray(y))),
+        method="BFGS",
+        options={"gtol": 1e-10},
+    )
     assert float(V(jnp.asarray(x))) <= ref.fun + 1e-9
 
 
@@ -516,8 +570,14 @@ def test_robot_file_names_missing_physical_keys_per_segment(tmp_path):
 
     from tension_zones.model import MissingDesignKeyWarning
 
-    full = {"n_wires": 3, "length_mm": 20.0, "pitch_radius_mm": 2.0, "wire_stiffness_N_per_mm": 80.0,
-            "backbone_EI_Nmm2": 900.0, "preload_N": 0.5}
+    full = {
+        "n_wires": 3,
+        "length_mm": 20.0,
+        "pitch_radius_mm": 2.0,
+        "wire_stiffness_N_per_mm": 80.0,
+        "backbone_EI_Nmm2": 900.0,
+        "preload_N": 0.5,
+    }
     part = {k: v for k, v in full.items() if k != "preload_N"}
     p = tmp_path / "r.json"
     p.write_text(json.dumps({"segments": [full, part]}))

@@ -25,8 +25,9 @@ def solved(robot, q, load, m, freedom=None):
     st = Structure(robot.n_wires_per_segment, m)
     B = E.solve(phys, st, q, load.tip_force)
     p, _ = chain_tip(E.piece_lengths(phys, st), B)
-    sm = E._Sample(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.zeros(robot.n_wires),
-                   jnp.asarray(True))
+    sm = E._Sample(
+        phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.zeros(robot.n_wires), jnp.asarray(True)
+    )
     tau = np.asarray(sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0))
     return np.asarray(p), np.asarray(B), tau
 
@@ -40,8 +41,9 @@ def test_tendons_alone_give_constant_curvature_exactly():
     assert np.isclose(np.asarray(tz.forward(robot, Q, pieces=4)[0]), p1, atol=1e-9).all()
 
 
-@pytest.mark.parametrize("load", [Load(jnp.zeros(3), jnp.array([0.0, 0.0, -0.003])),
-                                  Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0]))])
+@pytest.mark.parametrize(
+    "load", [Load(jnp.zeros(3), jnp.array([0.0, 0.0, -0.003])), Load(jnp.zeros(3), jnp.array([0.003, 0.0, 0.0]))]
+)
 def test_weight_converges_to_the_rod_at_second_order(load):
     """Planar: the rod (solve_bvp, same tendon tensions) is reached as O(1/m^2)."""
     robot = tz.Robot(SEG)
@@ -62,21 +64,35 @@ def test_tip_force_and_weight_in_3d_match_a_torsion_free_rod():
     robot = tz.Robot(SEG)
     load = Load(jnp.array([0.0, 0.4, -0.2]), jnp.array([0.002, 0.0, -0.002]))
     p, _, tau = solved(robot, Q, load, 16)
-    ref = rr.solve_segment(60.0, 2454.0, np.asarray(SEG.wire_angles), 4.5, tau, weight=np.asarray(load.gravity),
-                           tip_force=np.asarray(load.tip_force), GJ=1e9)
+    ref = rr.solve_segment(
+        60.0,
+        2454.0,
+        np.asarray(SEG.wire_angles),
+        4.5,
+        tau,
+        weight=np.asarray(load.gravity),
+        tip_force=np.asarray(load.tip_force),
+        GJ=1e9,
+    )
     assert np.linalg.norm(p - ref.tip_position) < 0.02
 
 
 def test_two_segments_under_weight_match_the_rod():
-    robot = tz.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), wire_stiffness=30.0,
-                                backbone_EI=1500.0),
-                      tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), wire_stiffness=80.0,
-                                backbone_EI=3000.0)])
+    robot = tz.Robot(
+        [
+            tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), wire_stiffness=30.0, backbone_EI=1500.0),
+            tz.Design(
+                4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), wire_stiffness=80.0, backbone_EI=3000.0
+            ),
+        ]
+    )
     q = jnp.array([-1.5, 0.4, 0.4, 0.3, -1.0, 0.3, 0.3])
     load = Load(jnp.zeros(3), jnp.array([0.0, 0.002, -0.003]))
     p, _, tau = solved(robot, q, load, 8)
-    segs = [rr.Segment(45.0, 1500.0, tuple(np.radians([10, 130, 250])), 3.5, tuple(tau[:3]), GJ=1e9),
-            rr.Segment(70.0, 3000.0, tuple(np.radians([45, 135, 215, 315])), 5.0, tuple(tau[3:]), GJ=1e9)]
+    segs = [
+        rr.Segment(45.0, 1500.0, tuple(np.radians([10, 130, 250])), 3.5, tuple(tau[:3]), GJ=1e9),
+        rr.Segment(70.0, 3000.0, tuple(np.radians([45, 135, 215, 315])), 5.0, tuple(tau[3:]), GJ=1e9),
+    ]
     ref = rr.solve_rod(segs, weight=np.asarray(load.gravity))
     p1, _, _ = solved(robot, q, load, 1)
     assert np.linalg.norm(p - ref.tip_position) < 0.05 < np.linalg.norm(p1 - ref.tip_position)
@@ -88,8 +104,14 @@ def _with_friction(robot, q, mu, d, m, load=None):
     phys.update(friction=jnp.asarray(mu, float), gravity=jnp.asarray(load.gravity, float))
     st = Structure(robot.n_wires_per_segment, m)
     B = E.solve(phys, st, q, load.tip_force, jnp.asarray(d, float))
-    sm = E._Sample(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.asarray(d, float),
-                   jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity))))
+    sm = E._Sample(
+        phys,
+        st,
+        jnp.asarray(q, float),
+        jnp.asarray(load.tip_force, float),
+        jnp.asarray(d, float),
+        jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity))),
+    )
     return np.asarray(chain_tip(E.piece_lengths(phys, st), B)[0]), B.reshape(-1), sm
 
 
@@ -117,10 +139,28 @@ def test_friction_decays_the_tension_over_the_disks_as_the_capstan_rod(d):
 def test_friction_force_jacobian_is_exact_with_loads_and_segments():
     """The implicit derivative's ``dF/dx`` in closed form against forward mode, two segments in pieces,
     wires pulled and released, a tip force and a weight; gradients finite at the straight pose."""
-    robot = tz.Robot([tz.Design(3, 45.0, 3.5, wire_angles=np.radians([10, 130, 250]), wire_stiffness=30.0,
-                                backbone_EI=1500.0, preload=1.0),
-                      tz.Design(4, 70.0, 5.0, wire_angles=np.radians([45, 135, 215, 315]), wire_stiffness=80.0,
-                                backbone_EI=3000.0, preload=1.0)])
+    robot = tz.Robot(
+        [
+            tz.Design(
+                3,
+                45.0,
+                3.5,
+                wire_angles=np.radians([10, 130, 250]),
+                wire_stiffness=30.0,
+                backbone_EI=1500.0,
+                preload=1.0,
+            ),
+            tz.Design(
+                4,
+                70.0,
+                5.0,
+                wire_angles=np.radians([45, 135, 215, 315]),
+                wire_stiffness=80.0,
+                backbone_EI=3000.0,
+                preload=1.0,
+            ),
+        ]
+    )
     q = jnp.array([-1.5, 0.4, 0.4, 0.3, -1.0, 0.3, 0.3])
     d = np.sign(np.asarray(q))
     load = Load(jnp.array([0.05, -0.1, 0.0]), jnp.array([0.0, 0.002, -0.003]))
@@ -208,11 +248,13 @@ def test_a_large_rod_batch_runs_to_the_end():
     import subprocess
     import sys
 
-    code = ("import numpy as np, jax, jax.numpy as jnp, tension_zones as tz\n"
-            "r = tz.Robot.from_json(tz.example_path('ftdcr_v4/design.json'))\n"
-            "Q = jnp.asarray(np.random.default_rng(0).uniform(-2, 0.5, (1000, 9)))\n"
-            "p = jax.jit(jax.vmap(lambda q: tz.forward(r, q, pieces=4)[0]))(Q)\n"
-            "print(bool(np.all(np.isfinite(np.asarray(p)))))\n")
+    code = (
+        "import numpy as np, jax, jax.numpy as jnp, tension_zones as tz\n"
+        "r = tz.Robot.from_json(tz.example_path('ftdcr_v4/design.json'))\n"
+        "Q = jnp.asarray(np.random.default_rng(0).uniform(-2, 0.5, (1000, 9)))\n"
+        "p = jax.jit(jax.vmap(lambda q: tz.forward(r, q, pieces=4)[0]))(Q)\n"
+        "print(bool(np.all(np.isfinite(np.asarray(p)))))\n"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=240, check=False)
     assert out.returncode == 0 and out.stdout.strip() == "True", out.stderr[-2000:]
 

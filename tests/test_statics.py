@@ -57,9 +57,15 @@ def test_tension_qp_is_the_minimum_norm(d3):
     d = _design(4, preload=1.0)
     A, rhs, sol = _solve(d, np.radians(60.0), np.radians(20.0), jnp.asarray([3.0, -1.0, 2.0, 0, 0, 0]))
     A, rhs = np.asarray(A), np.asarray(rhs)
-    ref = minimize(lambda t: t @ t, np.full(4, 3.0), jac=lambda t: 2 * t, method="SLSQP",
-                   constraints=[{"type": "eq", "fun": lambda t: A @ t - rhs, "jac": lambda t: A}],
-                   bounds=[(1.0, None)] * 4, options={"ftol": 1e-14, "maxiter": 500})
+    ref = minimize(
+        lambda t: t @ t,
+        np.full(4, 3.0),
+        jac=lambda t: 2 * t,
+        method="SLSQP",
+        constraints=[{"type": "eq", "fun": lambda t: A @ t - rhs, "jac": lambda t: A}],
+        bounds=[(1.0, None)] * 4,
+        options={"ftol": 1e-14, "maxiter": 500},
+    )
     np.testing.assert_allclose(np.asarray(sol.tau), ref.x, atol=1e-6)
 
 
@@ -111,8 +117,11 @@ def test_psi_and_b_routes_agree(n):
 
 
 @settings(max_examples=20, deadline=None)
-@given(theta_deg=st.floats(1.0, 89.0), delta_deg=st.floats(0.0, 360.0),
-       f=st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3))
+@given(
+    theta_deg=st.floats(1.0, 89.0),
+    delta_deg=st.floats(0.0, 360.0),
+    f=st.lists(st.floats(-10.0, 10.0), min_size=3, max_size=3),
+)
 def test_K_psi_symmetric_for_a_force(theta_deg, delta_deg, f):
     """Without a moment every term of K_psi is a Hessian (of U, tau.l, -f.p): symmetric."""
     d = _design(3)
@@ -159,9 +168,7 @@ def _fd_vs_compliance(d, th, de, f0, dw, eps):
     out = []
     for push_pull, m in ((False, mask), (True, None)):
         qq = q if push_pull else q + slack
-        (pp, Rp, gp), (pm, Rm, gm) = (
-            _nonlinear_tip(d, qq, f0 + s * eps * dw, b0, push_pull) for s in (1.0, -1.0)
-        )
+        (pp, Rp, gp), (pm, Rm, gm) = (_nonlinear_tip(d, qq, f0 + s * eps * dw, b0, push_pull) for s in (1.0, -1.0))
         W = (Rp - Rm) @ tz.tip_pose_b(d, b0)[1].T / (2 * eps)
         fd = jnp.concatenate([(pp - pm) / (2 * eps), jnp.array([W[2, 1], W[0, 2], W[1, 0]])])
         C, ok = S.compliance(d, th, de, f0, m)
@@ -187,8 +194,7 @@ def test_preload_makes_reduced_equal_traditional():
     g = S.compliance_grid(_design(3, preload=5.0))
     assert np.all(g["n_taut_statics"] == 3) and np.all(g["feasible"])
     for q in ("mm", "deg"):
-        np.testing.assert_allclose(g[f"deflection_{q}_reduced"], g[f"deflection_{q}_full"],
-                                   rtol=1e-9, atol=0)
+        np.testing.assert_allclose(g[f"deflection_{q}_reduced"], g[f"deflection_{q}_full"], rtol=1e-9, atol=0)
     g0 = S.compliance_grid(_design(3))
     assert np.all(g0["deflection_mm_reduced"] > 1.5 * g0["deflection_mm_full"])  # slack wires matter
 
@@ -235,8 +241,12 @@ def test_bad_input_is_a_clear_error():
 
 # ------------------------------------------------------------------------------ closed forms
 @settings(max_examples=40, deadline=None)
-@given(u=st.floats(-1.6, 1.6), v=st.floats(-1.6, 1.6), scale=st.sampled_from([1.0, 1e-3, 0.2, 0.24]),
-       w=st.lists(st.floats(-10.0, 10.0), min_size=6, max_size=6))
+@given(
+    u=st.floats(-1.6, 1.6),
+    v=st.floats(-1.6, 1.6),
+    scale=st.sampled_from([1.0, 1e-3, 0.2, 0.24]),
+    w=st.lists(st.floats(-10.0, 10.0), min_size=6, max_size=6),
+)
 def test_load_terms_equal_nested_autodiff(u, v, scale, w):
     """The closed-form d(J_xb^T w)/db (force and moment parts) against forward mode over J_xb."""
     d = _design(3)
@@ -252,7 +262,7 @@ def _qp_reference(A, rhs, f_min):
     returns the tensions and whether they meet the KKT conditions (the pose is feasible)."""
     n = A.shape[1]
     best = None
-    for bits in range(2 ** n):
+    for bits in range(2**n):
         free = np.array([(bits >> k) & 1 for k in range(n)], bool)
         r = rhs - f_min * A[:, ~free].sum(axis=1)
         tau = np.full(n, f_min)
@@ -269,10 +279,15 @@ def _qp_reference(A, rhs, f_min):
 
 
 @settings(max_examples=40, deadline=None)
-@given(angles=st.lists(st.floats(0.0, 360.0), min_size=3, max_size=6),
-       rhs=st.lists(st.floats(-20.0, 20.0).filter(lambda x: x == 0 or abs(x) > 1e-6),  # no underflow
-                    min_size=2, max_size=2),
-       f_min=st.sampled_from([0.0, 0.5, 3.0]))
+@given(
+    angles=st.lists(st.floats(0.0, 360.0), min_size=3, max_size=6),
+    rhs=st.lists(
+        st.floats(-20.0, 20.0).filter(lambda x: x == 0 or abs(x) > 1e-6),  # no underflow
+        min_size=2,
+        max_size=2,
+    ),
+    f_min=st.sampled_from([0.0, 0.5, 3.0]),
+)
 @example(angles=[0.0, 0.0, 1.192092896e-07], rhs=[-1.0, 0.0], f_min=0.0)  # found by CI on 2026-12-04
 def test_tension_qp_matches_reference_for_any_layout(angles, rhs, f_min):
     """Uneven (and nearly coincident) wire layouts: the same tensions as the NumPy reference,
@@ -307,8 +322,9 @@ _subsets_qp = jax.jit(jax.vmap(S.min_norm_tensions, in_axes=(None, 0, None)))
 
 
 @settings(max_examples=15, deadline=None)
-@given(n=st.sampled_from([5, 9]), even=st.booleans(), seed=st.integers(0, 2**16),
-       f_min=st.sampled_from([0.0, 0.5, 5.0]))
+@given(
+    n=st.sampled_from([5, 9]), even=st.booleans(), seed=st.integers(0, 2**16), f_min=st.sampled_from([0.0, 0.5, 5.0])
+)
 def test_runs_of_wires_give_the_same_tensions_as_all_subsets(n, even, seed, f_min):
     """The solution's free set is a run of wires consecutive in angle (A = J_qb^T): choosing among
     the runs gives the tensions, multipliers and feasibility of the 2^n-subset enumeration."""

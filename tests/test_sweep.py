@@ -144,11 +144,13 @@ SHARDED = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
-    env = default_codegen_env("--xla_force_host_platform_device_count=4",
-                              PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])]
-                                                         + sys.path))
-    r = subprocess.run([sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env,
-                       timeout=600, check=False)
+    env = default_codegen_env(
+        "--xla_force_host_platform_device_count=4",
+        PYTHONPATH=os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[1])] + sys.path),
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env, timeout=600, check=False
+    )
     assert r.returncode == 0, r.stderr[-2000:]
     assert "identical 17" in r.stdout
 
@@ -158,13 +160,32 @@ def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
 # ------------------------------------------------------------------------------------------------
 def test_cli_sweep_writes_the_issue_arrays(tmp_path, capsys):
     out = tmp_path / "s.npz"
-    assert main(["sweep", "--wires", "3", "--length", "20", "--pitch-radius", "2", "--dq", "0.4",
-                 "--out", str(out), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "sweep",
+                "--wires",
+                "3",
+                "--length",
+                "20",
+                "--pitch-radius",
+                "2",
+                "--dq",
+                "0.4",
+                "--out",
+                str(out),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     assert capsys.readouterr().out == ""
     z = np.load(out)
     names = ["theta_L_deg", "delta_deg", "n_taut"] + [
-        f"{m}_{mode}" for mode in ("full", "reduced")
-        for m in ("kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "dp_max", "dw_max")]
+        f"{m}_{mode}"
+        for mode in ("full", "reduced")
+        for m in ("kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "dp_max", "dw_max")
+    ]
     for name in names:
         assert z[name].shape == (18, 145), name
     np.testing.assert_array_equal(z["theta_L_deg"][:, 0], np.arange(0, 90, 5.0))
@@ -172,16 +193,37 @@ def test_cli_sweep_writes_the_issue_arrays(tmp_path, capsys):
     # values are the independent reference's at those poses (tests/test_metrics.py)
     for i, j in ((11, 27), (3, 100), (17, 144)):
         for mode in ("full", "reduced"):
-            ref = ref_measures(20.0, 2.0, rad([0.0, 120.0, 240.0]), rad(z["theta_L_deg"][i, j]),
-                               rad(z["delta_deg"][i, j]), 0.4, mode == "reduced")
+            ref = ref_measures(
+                20.0,
+                2.0,
+                rad([0.0, 120.0, 240.0]),
+                rad(z["theta_L_deg"][i, j]),
+                rad(z["delta_deg"][i, j]),
+                0.4,
+                mode == "reduced",
+            )
             for k in MEASURES:
                 assert z[f"{k}_{mode}"][i, j] == pytest.approx(ref[k], rel=1e-9, abs=1e-12)
 
 
 def test_cli_sweep_uneven_angles_steps_and_dq(tmp_path):
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
-    common = ["sweep", "--wires", "4", "--length", "30", "--pitch-radius", "3",
-              "--angles", "0,80,180,260", "--theta-step", "17", "--delta-step", "45", "--quiet"]
+    common = [
+        "sweep",
+        "--wires",
+        "4",
+        "--length",
+        "30",
+        "--pitch-radius",
+        "3",
+        "--angles",
+        "0,80,180,260",
+        "--theta-step",
+        "17",
+        "--delta-step",
+        "45",
+        "--quiet",
+    ]
     assert main(common + ["--dq", "0.2", "--out", str(a)]) == 0
     n_compiled = compiled_chunk_count()
     assert main(common + ["--dq", "1.0", "--out", str(b)]) == 0
@@ -193,13 +235,16 @@ def test_cli_sweep_uneven_angles_steps_and_dq(tmp_path):
     assert za["n_taut"][0, 2] == 1  # delta = 90 deg is a zone end of wire 1
 
 
-@pytest.mark.parametrize("extra, needle", [
-    (["--length", "-1"], "length must be positive"),
-    (["--dq", "0"], "--dq must be a positive number"),
-    (["--theta-step", "-5"], "--theta-step must be a positive number"),
-    (["--wires", "2"], "n_wires must be at least 3"),
-    (["--angles", "0,1"], "--angles has 2 values"),
-])
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--length", "-1"], "length must be positive"),
+        (["--dq", "0"], "--dq must be a positive number"),
+        (["--theta-step", "-5"], "--theta-step must be a positive number"),
+        (["--wires", "2"], "n_wires must be at least 3"),
+        (["--angles", "0,1"], "--angles has 2 values"),
+    ],
+)
 def test_cli_sweep_errors_are_one_line(tmp_path, capsys, extra, needle):
     out = tmp_path / "s.npz"
     argv = ["sweep", "--wires", "3", "--length", "20", "--pitch-radius", "2", "--out", str(out)]
@@ -207,7 +252,7 @@ def test_cli_sweep_errors_are_one_line(tmp_path, capsys, extra, needle):
         if extra[k] in argv:
             argv[argv.index(extra[k]) + 1] = extra[k + 1]
         else:
-            argv += extra[k: k + 2]
+            argv += extra[k : k + 2]
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
@@ -231,8 +276,7 @@ def test_cli_sweep_32_wires_within_a_minute(tmp_path):
     assert default_chunk(8) == 1 << 14 and default_chunk(32) == 1 << 10 and default_chunk(1000) == 256
     out = tmp_path / "s32.npz"
     t0 = time.perf_counter()
-    assert main(["sweep", "--wires", "32", "--length", "20", "--pitch-radius", "2", "--out", str(out),
-                 "--quiet"]) == 0
+    assert main(["sweep", "--wires", "32", "--length", "20", "--pitch-radius", "2", "--out", str(out), "--quiet"]) == 0
     assert time.perf_counter() - t0 < 60
     z = np.load(out)
     assert z["dp_max_reduced"].shape == (18, 145) and np.all(np.isfinite(z["dp_max_reduced"]))

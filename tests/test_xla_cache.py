@@ -7,8 +7,10 @@ import sys
 
 from tension_zones._xla import cache_dir
 
-PROBE = ("import tension_zones.model, jax, jax.numpy as jnp, time\n"
-         "print(jax.config.jax_compilation_cache_dir or os.environ.get('JAX_COMPILATION_CACHE_DIR'))\n")
+PROBE = (
+    "import tension_zones.model, jax, jax.numpy as jnp, time\n"
+    "print(jax.config.jax_compilation_cache_dir or os.environ.get('JAX_COMPILATION_CACHE_DIR'))\n"
+)
 
 
 def _probe(env):
@@ -55,8 +57,12 @@ def test_fast_compile_options_only_where_jaxlib_has_them_and_change_no_result(mo
     from tension_zones import _xla
 
     level = {"xla_backend_optimization_level": 3}
-    for version, expected in (((0, 4, 30), {}), ((0, 5, 1), {}), ((0, 5, 3), {"xla_cpu_use_fusion_emitters": False}),
-                              ((0, 10, 2), {"xla_cpu_use_fusion_emitters": False})):
+    for version, expected in (
+        ((0, 4, 30), {}),
+        ((0, 5, 1), {}),
+        ((0, 5, 3), {"xla_cpu_use_fusion_emitters": False}),
+        ((0, 10, 2), {"xla_cpu_use_fusion_emitters": False}),
+    ):
         monkeypatch.setattr(_xla, "_jaxlib_version", lambda v=version: v)
         assert _xla.fast_compile_options() == {**level, **expected}, version
         assert _xla.fast_compile_options(optimise=False) == {**level, **expected, **{k: 0 for k in level}}
@@ -82,8 +88,9 @@ np.testing.assert_allclose(fast_grad(x), jax.jit(jax.grad(f))(x), rtol=1e-12, at
 print("equal")
 """
     flags = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if "fusion_emitters" not in f)
-    out = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, XLA_FLAGS=flags), capture_output=True,
-                         text=True, check=False)
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=dict(os.environ, XLA_FLAGS=flags), capture_output=True, text=True, check=False
+    )
     assert out.returncode == 0 and out.stdout.strip() == "equal", out.stderr[-2000:]
     if _xla.fast_compile_flag():  # the suite runs with the same switch for the whole process
         assert _xla.fast_compile_flag() in os.environ["XLA_FLAGS"]
@@ -101,8 +108,10 @@ def test_programs_kept_on_disk_are_loaded_without_tracing_and_keyed_by_sources(t
 
     def f(x, d):
         traced.append(1)  # runs only while tracing
-        return {"y": jnp.sin(x) @ d["a"], "z": jax.lax.while_loop(lambda c: c[0] < 5, lambda c: (c[0] + 1, c[1] * 2.0),
-                                                                   (0, x))[1]}
+        return {
+            "y": jnp.sin(x) @ d["a"],
+            "z": jax.lax.while_loop(lambda c: c[0] < 5, lambda c: (c[0] + 1, c[1] * 2.0), (0, x))[1],
+        }
 
     args = (jnp.linspace(0.0, 1.0, 7), {"a": jnp.ones((7, 2))})
     want = jax.jit(f)(*args)

@@ -62,8 +62,7 @@ def test_sector_tables_even_layouts(n):
         points = [s for s in tmap.sectors if s.width_deg == 0]
         assert len(points) == n and all(s.n_taut == n // 2 - 1 for s in points)
     # the table agrees with the traced mask everywhere on a fine grid (and at every sector edge)
-    grid = np.unique(np.concatenate([np.arange(0.0, 360.0, 0.1),
-                                     [s.start_deg for s in tmap.sectors]]))
+    grid = np.unique(np.concatenate([np.arange(0.0, 360.0, 0.1), [s.start_deg for s in tmap.sectors]]))
     masks = np.asarray(jax.vmap(lambda x: tz.tension_mask(d, x))(rad(grid)))
     for dd, m in zip(grid, masks):
         assert tmap.taut_at(dd) == tuple(np.flatnonzero(m) + 1), dd
@@ -71,8 +70,15 @@ def test_sector_tables_even_layouts(n):
 
 def test_three_wire_table_matches_paper(d3):
     rows = [(s.start_deg, s.end_deg, s.wires) for s in tz.tension_map(d3).sectors]
-    expect = [(0, 30, (1,)), (30, 90, (1, 3)), (90, 150, (3,)), (150, 210, (2, 3)),
-              (210, 270, (2,)), (270, 330, (1, 2)), (330, 360, (1,))]
+    expect = [
+        (0, 30, (1,)),
+        (30, 90, (1, 3)),
+        (90, 150, (3,)),
+        (150, 210, (2, 3)),
+        (210, 270, (2,)),
+        (270, 330, (1, 2)),
+        (330, 360, (1,)),
+    ]
     assert len(rows) == len(expect)
     for (a, b, w), (ea, eb, ew) in zip(rows, expect):
         assert (a, b, w) == (pytest.approx(ea), pytest.approx(eb), ew)

@@ -40,8 +40,14 @@ from ..model._zones import mask_from_score
 DEFAULT_DQ = 0.4
 #: Names of the per-mode measures returned by :func:`pose_measures`.
 MEASURES = (
-    "kci_v", "kci_w", "sigma_min_v", "sigma_min_w", "sigma_min_nz_v", "sigma_min_nz_w",
-    "dp_max", "dw_max",
+    "kci_v",
+    "kci_w",
+    "sigma_min_v",
+    "sigma_min_w",
+    "sigma_min_nz_v",
+    "sigma_min_nz_w",
+    "dp_max",
+    "dw_max",
 )
 MODES = ("full", "reduced")
 
@@ -161,7 +167,7 @@ def _pose_inputs(design: Design, theta_L, delta, dq):
     sin_k = wmap(lambda c, s: sd * c + cd * s, ca, sa)
     if unrolled(n):
         kept = keep(list(terms) + cos_k + sin_k, design.length)
-        terms, cos_k, sin_k = kept[:8], kept[8:8 + n], kept[8 + n:]
+        terms, cos_k, sin_k = kept[:8], kept[8 : 8 + n], kept[8 + n :]
     else:
         kept = keep(list(terms) + [cos_k, sin_k], design.length)
         terms, (cos_k, sin_k) = kept[:8], kept[8:]
@@ -256,8 +262,10 @@ def _zonogon_max_sq(g0, g1, Jx):
     v0 = 2.0 * jnp.sum(jnp.where(upto, h0[None, :], 0.0), axis=1) - jnp.sum(h0)
     v1 = 2.0 * jnp.sum(jnp.where(upto, h1[None, :], 0.0), axis=1) - jnp.sum(h1)
     dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
-    return (jnp.max(dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2]),
-            jnp.max(dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]))
+    return (
+        jnp.max(dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2]),
+        jnp.max(dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]),
+    )
 
 
 def _uncertainty_sq(P0, P1, dq, Jx):
@@ -272,10 +280,8 @@ def _uncertainty_sq(P0, P1, dq, Jx):
     sq = [[0.0, 0.0] for _ in V]  # |dx[:3]|^2, |dx[3:]|^2 per vertex, dx = Jx v
     for i, (v0, v1) in enumerate(V):
         dX = [v0 * Jx[row, 0] + v1 * Jx[row, 1] for row in range(6)]
-        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2],
-                 dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
-    return (functools.reduce(jnp.maximum, [q[0] for q in sq]),
-            functools.reduce(jnp.maximum, [q[1] for q in sq]))
+        sq[i] = [dX[0] * dX[0] + dX[1] * dX[1] + dX[2] * dX[2], dX[3] * dX[3] + dX[4] * dX[4] + dX[5] * dX[5]]
+    return (functools.reduce(jnp.maximum, [q[0] for q in sq]), functools.reduce(jnp.maximum, [q[1] for q in sq]))
 
 
 def _measures(Jx, blocks, a, b, dq, design):
@@ -325,8 +331,9 @@ def _check_concrete_pose(theta_L, delta, dq) -> None:
         big = np.isfinite(v) & (np.abs(v) > limit)
         if np.any(big):
             x = float(v[big].flat[0])
-            raise ValueError(f"{name} = {x:g} is beyond +-{what}: radians are expected "
-                             f"(np.radians({x:g}) = {math.radians(x):.6g})")
+            raise ValueError(
+                f"{name} = {x:g} is beyond +-{what}: radians are expected (np.radians({x:g}) = {math.radians(x):.6g})"
+            )
     if not isinstance(dq, jax.core.Tracer) and np.any(np.asarray(dq, dtype=float) < 0):
         raise ValueError(f"dq must be non-negative (a bound on each joint's error, mm), got {np.asarray(dq).tolist()}")
 
@@ -357,8 +364,7 @@ def pose_measures(design: Design, theta_L, delta, dq=DEFAULT_DQ, mask=None):
     if mask is not None:
         mask = jnp.asarray(mask, Jx.dtype)
         if mask.shape != (design.n_wires,):  # shapes are static: a clear error, never a broadcast
-            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, "
-                             f"got {mask.shape}")
+            raise ValueError(f"mask must have shape ({design.n_wires},) for {design.n_wires} wires, got {mask.shape}")
         m = per_wire(mask)
         a, b = wmap(lambda x, mk: x * mk, a, m), wmap(lambda y, mk: y * mk, b, m)
     blocks = _kept_blocks(Jx, design)

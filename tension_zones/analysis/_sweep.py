@@ -46,6 +46,8 @@ def default_chunk(n_wires: int) -> int:
     if n_wires <= 8:
         return DEFAULT_CHUNK
     return max(256, DEFAULT_CHUNK >> (2 * math.ceil(math.log2(n_wires / 8))))
+
+
 #: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
 #: and third chunk in flight keep both cores busy (one program alone runs on about one core).
 IN_FLIGHT = 3
@@ -154,8 +156,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
         stop = min(start + chunk, n_poses)
         if grid is not None:
             th_g, de_g, n_de, n_all = grid_d
-            res = _eval_grid_chunk_jit(fn, (chunk, batch), design_d, idx_t(start), th_g, de_g, n_de, n_all,
-                                       args_d)
+            res = _eval_grid_chunk_jit(fn, (chunk, batch), design_d, idx_t(start), th_g, de_g, n_de, n_all, args_d)
             return start, stop, res
         th, de = (np.asarray(x, dt) for x in poses_of(start, stop))
         if stop - start < chunk:  # pad with the first pose: one compiled shape for every chunk
@@ -205,8 +206,16 @@ def _store_oldest(pending, store, bar):
 def _progress(total, desc, disable, unit="pose", initial=0):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc or "sweep", unit=unit, unit_scale=True, disable=disable,
-                leave=False, dynamic_ncols=True, initial=initial)
+    return tqdm(
+        total=total,
+        desc=desc or "sweep",
+        unit=unit,
+        unit_scale=True,
+        disable=disable,
+        leave=False,
+        dynamic_ncols=True,
+        initial=initial,
+    )
 
 
 def sweep_poses(
@@ -240,8 +249,7 @@ def sweep_poses(
     de = np.asarray(delta, dtype=float)
     if th.ndim != 1 or th.shape != de.shape:
         raise ValueError(f"theta_L and delta must be 1-D of equal length, got {th.shape} and {de.shape}")
-    return _run(fn, design, th.size, lambda a, b: (th[a:b], de[a:b]), args, chunk_size, devices,
-                quiet, keep, desc)
+    return _run(fn, design, th.size, lambda a, b: (th[a:b], de[a:b]), args, chunk_size, devices, quiet, keep, desc)
 
 
 def sweep_grid(
@@ -349,14 +357,14 @@ def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, 
     chunk, mesh = layout
 
     def local(designs, th_grid, de_grid, n_de, n_poses, args):
-        return jax.lax.map(
-            lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
+        return jax.lax.map(lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
 
     split, whole = PartitionSpec("designs"), PartitionSpec()
     # each device's designs are independent (no collectives), so the varying-axis check is off: the
     # loops' carries start replicated and become per-device
-    return jax.shard_map(local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole),
-                         out_specs=split, check_vma=False)(designs, th_grid, de_grid, n_de, n_poses, args)
+    return jax.shard_map(
+        local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole), out_specs=split, check_vma=False
+    )(designs, th_grid, de_grid, n_de, n_poses, args)
 
 
 _designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
@@ -366,8 +374,9 @@ _designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
 def _output_shapes(fn, n_wires, dtype, arg_specs):
     """``{output: shape}`` of ``fn`` at one pose (traced once per function, wire count and argument
     shapes: tracing the kinematic measures costs more than exploring a few designs)."""
-    spec = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype),
-                                  Design(n_wires, 2.0, 1.0, dtype=dtype))
+    spec = jax.tree_util.tree_map(
+        lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), Design(n_wires, 2.0, 1.0, dtype=dtype)
+    )
     scalar = jax.ShapeDtypeStruct((), dtype)
     args = tuple(jax.ShapeDtypeStruct(shape, dt) for shape, dt in arg_specs)
     out = jax.eval_shape(lambda d, t, x, a: fn(d, t, x, *a), spec, scalar, scalar, args)
@@ -390,8 +399,7 @@ def _check_stats(fn, design, args, stats):
         if key not in shapes:
             raise ValueError(f"stat {name!r}: the function has no output {key!r}; it returns {sorted(shapes)}")
         if shapes[key] != ():
-            raise ValueError(f"stat {name!r}: output {key!r} is not a scalar per pose "
-                             f"(shape {shapes[key]})")
+            raise ValueError(f"stat {name!r}: output {key!r} is not a scalar per pose (shape {shapes[key]})")
     return stats
 
 
@@ -423,8 +431,7 @@ def _done_everywhere(is_done):
 def _batch_and_grid(designs, theta_L, delta) -> tuple[Design, np.ndarray, np.ndarray]:
     """A batch of designs (NumPy leaves with a leading axis) and a grid's axes (non-empty, 1-D), checked."""
     if not isinstance(designs, Design) or np.ndim(designs.length) != 1:
-        raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis "
-                        "(a batch of designs)")
+        raise TypeError("designs must be a tension_zones.Design whose leaves have a leading axis (a batch of designs)")
     th, de = (np.asarray(x, dtype=float) for x in (theta_L, delta))
     if th.ndim != 1 or de.ndim != 1 or th.size == 0 or de.size == 0:
         raise ValueError(f"theta_L and delta must be non-empty 1-D grids, got shapes {th.shape} and {de.shape}")
@@ -503,7 +510,7 @@ def sweep_designs(
     results: Any
     results, is_done = _resumed(done, n_designs, D, S) if first else (None, np.zeros(n_chunks, bool))
     pending = np.flatnonzero(~_done_everywhere(is_done))
-    mine = pending[jax.process_index()::nproc]
+    mine = pending[jax.process_index() :: nproc]
     n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
 
     dt = designs.dtype
@@ -535,8 +542,9 @@ def sweep_designs(
             bar.update(b - a)
 
     initial = n_designs - int(np.sum(np.minimum(pending * D + D, n_designs) - pending * D))
-    with _progress(n_designs, desc or "designs", quiet or not first or pending.size < 2,
-                   unit="design", initial=initial) as bar:
+    with _progress(
+        n_designs, desc or "designs", quiet or not first or pending.size < 2, unit="design", initial=initial
+    ) as bar:
         queue: collections.deque[tuple[int, Any]] = collections.deque()
         for k in range(n_rounds):
             queue.append(launch(k))

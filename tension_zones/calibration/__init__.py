@@ -17,6 +17,26 @@ from ._problem import Problem, compilations
 from ._report import write_report
 from .effects import Effect
 
-__all__ = ["READERS", "DataError", "Dataset", "Effect", "Problem", "Result", "RobotModel", "calibrate",
-           "compilations", "home_memory", "load_data", "motion_direction", "noise_floor", "predict_report", "read_csv", "read_opencr", "rmse",
-           "rmse_aligned", "score_test", "structure_test", "write_report"]
+__all__ = [
+    "READERS",
+    "DataError",
+    "Dataset",
+    "Effect",
+    "Problem",
+    "Result",
+    "RobotModel",
+    "calibrate",
+    "compilations",
+    "home_memory",
+    "load_data",
+    "motion_direction",
+    "noise_floor",
+    "predict_report",
+    "read_csv",
+    "read_opencr",
+    "rmse",
+    "rmse_aligned",
+    "score_test",
+    "structure_test",
+    "write_report",
+]

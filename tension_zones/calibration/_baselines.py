@@ -30,20 +30,38 @@ def baselines(data, train, held, val) -> dict | None:
     X = np.c_[data.q, data.f] if np.any(data.f) else np.asarray(data.q)
     y = np.asarray(data.p)
     grids: dict[str, list] = {
-        "knn": [(f"k={k}", lambda k=k: make_pipeline(StandardScaler(), KNeighborsRegressor(
-            min(k, int(train.sum())), weights="distance"))) for k in (1, 3, 5, 10, 20)],
-        "poly_ridge": [(f"degree={d}, alpha={a:g}",
-                        lambda d=d, a=a: make_pipeline(StandardScaler(), PolynomialFeatures(d), Ridge(alpha=a)))
-                       for d in (1, 2, 3, 4) for a in (1e-3, 1e-1, 10.0)],
+        "knn": [
+            (
+                f"k={k}",
+                lambda k=k: make_pipeline(
+                    StandardScaler(), KNeighborsRegressor(min(k, int(train.sum())), weights="distance")
+                ),
+            )
+            for k in (1, 3, 5, 10, 20)
+        ],
+        "poly_ridge": [
+            (
+                f"degree={d}, alpha={a:g}",
+                lambda d=d, a=a: make_pipeline(StandardScaler(), PolynomialFeatures(d), Ridge(alpha=a)),
+            )
+            for d in (1, 2, 3, 4)
+            for a in (1e-3, 1e-1, 10.0)
+        ],
     }
     out = {}
     fit_all = train | held
     for name, grid in grids.items():
-        scores = [(_rmse(make().fit(X[train], y[train]).predict(X[held]), y[held]), label, make)
-                  for label, make in grid]
+        scores = [
+            (_rmse(make().fit(X[train], y[train]).predict(X[held]), y[held]), label, make) for label, make in grid
+        ]
         h, label, make = min(scores, key=lambda s: s[0])
         pv = make().fit(X[fit_all], y[fit_all]).predict(X[val])
         d = pv - y[val]
-        out[name] = {"choice": label, "rmse_held_out_mm": h, "rmse_validate_mm": _rmse(pv, y[val]),
-                     "rmse_validate_aligned_mm": _rmse(d - d.mean(axis=0), 0 * d), "predicted": pv}
+        out[name] = {
+            "choice": label,
+            "rmse_held_out_mm": h,
+            "rmse_validate_mm": _rmse(pv, y[val]),
+            "rmse_validate_aligned_mm": _rmse(d - d.mean(axis=0), 0 * d),
+            "predicted": pv,
+        }
     return out

@@ -32,41 +32,70 @@ def knife_edges(rounds: list) -> list[dict]:
                 continue  # a better refit was kept: crossing this one's edge changes nothing
             kept = bool(t["accepted"])
             other = rd["rmse_held_out_mm"] if kept else t["rmse_held_out_mm"]
-            tests = [("held-out drop", t["sse_drop"], t["needed"]),
-                     ("training drop", t.get("sse_drop_train", np.inf), t["needed"]),
-                     ("later samples' drop", t.get("sse_drop_later", np.inf), t["needed"]),
-                     ("share of the excess", t.get("share_held_out", 0.0), t.get("share_needed", 0.0))]
+            tests = [
+                ("held-out drop", t["sse_drop"], t["needed"]),
+                ("training drop", t.get("sse_drop_train", np.inf), t["needed"]),
+                ("later samples' drop", t.get("sse_drop_later", np.inf), t["needed"]),
+                ("share of the excess", t.get("share_held_out", 0.0), t.get("share_needed", 0.0)),
+            ]
             for test, value, threshold in tests:
                 # an edge decides only where the refit's other tests passed (or it was kept)
                 if _near(value, threshold) and (kept or t.get("short_of_share") or test != "share of the excess"):
-                    out.append({"round": rd["round"], "what": f"refit with {t['name']}", "test": test,
-                                "value": float(value), "threshold": float(threshold),
-                                "decided": "kept" if kept else "not kept", "other_side_rmse_mm": float(other)})
+                    out.append(
+                        {
+                            "round": rd["round"],
+                            "what": f"refit with {t['name']}",
+                            "test": test,
+                            "value": float(value),
+                            "threshold": float(threshold),
+                            "decided": "kept" if kept else "not kept",
+                            "other_side_rmse_mm": float(other),
+                        }
+                    )
         jl = rd.get("joint_look")
         if jl:
-            for test, value, threshold in (("share of the excess", jl["share_held_out"], jl["share_needed"]),
-                                           ("held-out drop", jl["sse_drop"], jl["needed"])):
+            for test, value, threshold in (
+                ("share of the excess", jl["share_held_out"], jl["share_needed"]),
+                ("held-out drop", jl["sse_drop"], jl["needed"]),
+            ):
                 if _near(value, threshold):
-                    out.append({"round": rd["round"], "what": "joint look (" + " + ".join(jl["added"]) + ")",
-                                "test": test, "value": float(value), "threshold": float(threshold),
-                                "decided": "kept" if jl["kept"] else "not kept",
-                                "other_side_rmse_mm": float(jl.get("rmse_before_mm", np.nan) if jl["kept"]
-                                                            else jl["rmse_held_out_mm"])})
+                    out.append(
+                        {
+                            "round": rd["round"],
+                            "what": "joint look (" + " + ".join(jl["added"]) + ")",
+                            "test": test,
+                            "value": float(value),
+                            "threshold": float(threshold),
+                            "decided": "kept" if jl["kept"] else "not kept",
+                            "other_side_rmse_mm": float(
+                                jl.get("rmse_before_mm", np.nan) if jl["kept"] else jl["rmse_held_out_mm"]
+                            ),
+                        }
+                    )
         la = rd.get("look_ahead")
         if la and "sse_drop" in la and _near(la["sse_drop"], la["needed"]):
             a, b = la["branches"]
             kept_first = la["kept"] == a["first"]
-            out.append({"round": rd["round"], "what": f"look-ahead ({a['first']} or {b['first']} first)",
-                        "test": "held-out drop", "value": float(la["sse_drop"]), "threshold": float(la["needed"]),
-                        "decided": f"{la['kept']} first",
-                        "other_side_rmse_mm": float((b if kept_first else a)["rmse_held_out_mm"])})
+            out.append(
+                {
+                    "round": rd["round"],
+                    "what": f"look-ahead ({a['first']} or {b['first']} first)",
+                    "test": "held-out drop",
+                    "value": float(la["sse_drop"]),
+                    "threshold": float(la["needed"]),
+                    "decided": f"{la['kept']} first",
+                    "other_side_rmse_mm": float((b if kept_first else a)["rmse_held_out_mm"]),
+                }
+            )
     return out
 
 
 def _edge_line(e: dict) -> str:
-    return (f"knife edge in round {e['round']}: {e['what']}, {e['test']} {e['value']:.4g} against "
-            f"{e['threshold']:.4g} needed ({e['decided']}; the other side: held out "
-            f"{e['other_side_rmse_mm']:.3f} mm)")
+    return (
+        f"knife edge in round {e['round']}: {e['what']}, {e['test']} {e['value']:.4g} against "
+        f"{e['threshold']:.4g} needed ({e['decided']}; the other side: held out "
+        f"{e['other_side_rmse_mm']:.3f} mm)"
+    )
 
 
 def bound_lines(at_bound: list, fitted: dict, declared: dict) -> list[str]:

@@ -147,24 +147,31 @@ class Dataset:
         spread, lo, hi = float(side[a]), MIN_SPREAD_PER_LENGTH * L, MAX_SPREAD_PER_LENGTH * L
         what = f"the tip positions span {spread:.3g} mm (column {cols[a]!r}, their widest) for a robot {L:g} mm long"
         if spread < lo <= 1000 * spread <= hi:
-            raise DataError(f"{name}: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it: are the positions in "
-                            f"metres? Millimetres are expected ({1000 * spread:.3g} mm in millimetres)")
+            raise DataError(
+                f"{name}: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it: are the positions in "
+                f"metres? Millimetres are expected ({1000 * spread:.3g} mm in millimetres)"
+            )
         if spread < lo and moving:
-            raise DataError(f"{name}: the tip never moves: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it "
-                            f"({lo:.3g} mm)")
+            raise DataError(
+                f"{name}: the tip never moves: {what}, less than {MIN_SPREAD_PER_LENGTH:.0%} of it ({lo:.3g} mm)"
+            )
         if spread > hi:
-            raise DataError(f"{name}: {what}, but two tips of a robot that long are at most {2 * L:g} mm apart "
-                            f"(allowed {hi:g} mm): are the positions in millimetres?")
+            raise DataError(
+                f"{name}: {what}, but two tips of a robot that long are at most {2 * L:g} mm apart "
+                f"(allowed {hi:g} mm): are the positions in millimetres?"
+            )
         radii = np.where(robot.crosses, np.asarray(robot.route_radii), 0.0)
         bound = MAX_WIRE_TRAVEL_FACTOR * math.pi * radii.sum(axis=1)
         over = np.abs(self.q) > bound[None, :]
         if np.any(over):
             i, k = (int(x) for x in np.argwhere(over)[0])
             n_seg = int(np.sum(robot.crosses[k]))
-            raise DataError(f"{name}: column {self._wire_column(k)!r}, {self._label(i)}: wire displacement "
-                            f"{self.q[i, k]:g} mm, but wire {k + 1} moves at most {bound[k]:.3g} mm ({MAX_WIRE_TRAVEL_FACTOR:g} "
-                            f"x pi x its pitch radii summed over the {n_seg} segment(s) it crosses, "
-                            f"{radii[k].sum():g} mm): are the commands in millimetres?")
+            raise DataError(
+                f"{name}: column {self._wire_column(k)!r}, {self._label(i)}: wire displacement "
+                f"{self.q[i, k]:g} mm, but wire {k + 1} moves at most {bound[k]:.3g} mm ({MAX_WIRE_TRAVEL_FACTOR:g} "
+                f"x pi x its pitch radii summed over the {n_seg} segment(s) it crosses, "
+                f"{radii[k].sum():g} mm): are the commands in millimetres?"
+            )
 
     def split(self, holdout: float = 0.25):
         """Boolean masks ``(train, held_out)``: the split belongs to the data.
@@ -181,9 +188,11 @@ class Dataset:
             k = max(int(round(1.0 / holdout)), 2)
             order = list(dict.fromkeys(self.groups))
             if len(order) < k:
-                raise DataError(f"{Path(self.source).name}: {len(order)} pattern group(s); holding out every "
-                                f"{k}th group (holdout {holdout}) needs at least {k}")
-            held_groups = set(order[k - 1::k])
+                raise DataError(
+                    f"{Path(self.source).name}: {len(order)} pattern group(s); holding out every "
+                    f"{k}th group (holdout {holdout}) needs at least {k}"
+                )
+            held_groups = set(order[k - 1 :: k])
             held = np.array([g in held_groups for g in self.groups])
             what = f"every {k}th pattern group"
         else:
@@ -192,37 +201,59 @@ class Dataset:
             what = f"the last {holdout:g} of the acquisition order"
         n_held = int(held.sum())
         if n - n_held < 10 or n_held < 10:
-            raise DataError(f"holdout {holdout} ({what}) leaves {n - n_held} training and {n_held} held-out "
-                            "samples; both need at least 10")
+            raise DataError(
+                f"holdout {holdout} ({what}) leaves {n - n_held} training and {n_held} held-out "
+                "samples; both need at least 10"
+            )
         return ~held, held
 
     def split_description(self, holdout: float = 0.25) -> str:
         if self.groups is not None:
             k = max(int(round(1.0 / holdout)), 2)
-            return (f"every {k}th pattern group (in order of first appearance, from the {k}th); whole "
-                    "groups, so no held-out sample is next to a training sample of the same motion")
+            return (
+                f"every {k}th pattern group (in order of first appearance, from the {k}th); whole "
+                "groups, so no held-out sample is next to a training sample of the same motion"
+            )
         return f"the last {holdout:g} of the acquisition order"
 
     def concat(self, other: Dataset) -> Dataset:
         """This recording followed by ``other`` as a second session (path-dependent state restarts)."""
         if other.n_wires != self.n_wires or other.frame != self.frame:
-            raise DataError(f"{Path(other.source).name} does not match {Path(self.source).name} "
-                            f"({other.n_wires} vs {self.n_wires} wires, frame {other.frame} vs {self.frame})")
+            raise DataError(
+                f"{Path(other.source).name} does not match {Path(self.source).name} "
+                f"({other.n_wires} vs {self.n_wires} wires, frame {other.frame} vs {self.frame})"
+            )
         cat = lambda a, b: None if a is None or b is None else np.concatenate([a, b])
         groups = None if self.groups is None or other.groups is None else tuple(self.groups) + tuple(other.groups)
         return dataclasses.replace(
-            self, sample=np.concatenate([self.sample, other.sample]), q=np.concatenate([self.q, other.q]),
-            f=np.concatenate([self.f, other.f]), p=np.concatenate([self.p, other.p]), rot=cat(self.rot, other.rot),
-            groups=groups, session=np.concatenate([np.asarray(self.session), np.asarray(other.session) + np.asarray(self.session).max() + 1]),
-            timestamp=cat(self.timestamp, other.timestamp), dropped=self.dropped + other.dropped)
+            self,
+            sample=np.concatenate([self.sample, other.sample]),
+            q=np.concatenate([self.q, other.q]),
+            f=np.concatenate([self.f, other.f]),
+            p=np.concatenate([self.p, other.p]),
+            rot=cat(self.rot, other.rot),
+            groups=groups,
+            session=np.concatenate(
+                [np.asarray(self.session), np.asarray(other.session) + np.asarray(self.session).max() + 1]
+            ),
+            timestamp=cat(self.timestamp, other.timestamp),
+            dropped=self.dropped + other.dropped,
+        )
 
     def subset(self, mask) -> Dataset:
         idx = np.flatnonzero(np.asarray(mask))
         take = lambda a: None if a is None else np.asarray(a)[idx]
         return dataclasses.replace(
-            self, sample=self.sample[idx], q=self.q[idx], f=self.f[idx], p=self.p[idx], rot=take(self.rot),
+            self,
+            sample=self.sample[idx],
+            q=self.q[idx],
+            f=self.f[idx],
+            p=self.p[idx],
+            rot=take(self.rot),
             groups=None if self.groups is None else tuple(np.asarray(self.groups, dtype=object)[idx]),
-            session=np.asarray(self.session)[idx], timestamp=take(self.timestamp))
+            session=np.asarray(self.session)[idx],
+            timestamp=take(self.timestamp),
+        )
 
 
 # --------------------------------------------------------------------------------------------
@@ -247,8 +278,10 @@ def _read_table(path) -> tuple[Path, list[str], list[list[str]]]:
     first = lines[0]
     delim = max((",", ";", "\t"), key=first.count)
     if first.count(delim) == 0:
-        raise DataError(f"{path.name}: the header has a single column ({first.strip()[:40]!r}); expected "
-                        "comma-, semicolon- or tab-separated columns")
+        raise DataError(
+            f"{path.name}: the header has a single column ({first.strip()[:40]!r}); expected "
+            "comma-, semicolon- or tab-separated columns"
+        )
     rows = list(csv.reader(lines, delimiter=delim))
     header = [h.strip() for h in rows[0]]
     dup = sorted({h for h in header if header.count(h) > 1})
@@ -298,20 +331,27 @@ def _resolve_bad(name: str, bad: dict, n: int, drop_bad: bool, sample_of) -> tup
     if bad and not drop_bad:
         i = min(bad)
         c, why = bad[i]
-        more = f" ({len(bad) - 1} more bad rows; --drop-bad drops isolated ones)" if len(bad) > 1 else \
-            " (--drop-bad drops isolated bad rows)"
+        more = (
+            f" ({len(bad) - 1} more bad rows; --drop-bad drops isolated ones)"
+            if len(bad) > 1
+            else " (--drop-bad drops isolated bad rows)"
+        )
         raise DataError(f"{name}: column {c!r}, row {i + 1}{sample_of(i)}: {why}{more}")
     rows = sorted(bad)
     if len(rows) > max(1, int(MAX_BAD_FRACTION * n)):
-        raise DataError(f"{name}: {len(rows)} of {n} rows are bad (first: row {rows[0] + 1}, column "
-                        f"{bad[rows[0]][0]!r}: {bad[rows[0]][1]}); more than {MAX_BAD_FRACTION:.0%} is not "
-                        "isolated, fix the file")
+        raise DataError(
+            f"{name}: {len(rows)} of {n} rows are bad (first: row {rows[0] + 1}, column "
+            f"{bad[rows[0]][0]!r}: {bad[rows[0]][1]}); more than {MAX_BAD_FRACTION:.0%} is not "
+            "isolated, fix the file"
+        )
     run = 1
     for a, b in itertools.pairwise(rows):
         run = run + 1 if b == a + 1 else 1
         if run > MAX_BAD_RUN:
-            raise DataError(f"{name}: rows {b - run + 2}..{b + 1} are all bad; a run of more than "
-                            f"{MAX_BAD_RUN} is not isolated, fix the file")
+            raise DataError(
+                f"{name}: rows {b - run + 2}..{b + 1} are all bad; a run of more than "
+                f"{MAX_BAD_RUN} is not isolated, fix the file"
+            )
     return tuple({"row": i + 1, "column": bad[i][0], "reason": bad[i][1]} for i in rows)
 
 
@@ -331,16 +371,21 @@ def glitches(p, q, cols) -> dict:
         size, span = _second_difference(p)
         q_size, q_span = _second_difference(q)
         scale = float(np.median(size[np.isfinite(size)])) if np.isfinite(size).any() else 0.0
-        hit = ((size > GLITCH_MEDIANS * max(scale, 1e-12)) & (size > GLITCH_NEIGHBOURS * span)
-               & (GLITCH_NEIGHBOURS * q_size <= q_span))
+        hit = (
+            (size > GLITCH_MEDIANS * max(scale, 1e-12))
+            & (size > GLITCH_NEIGHBOURS * span)
+            & (GLITCH_NEIGHBOURS * q_size <= q_span)
+        )
     idx = np.flatnonzero(hit)
     if len(idx) > max(1, GLITCH_SHARE * len(p)):
         return {}
     out = {}
     for k in idx:
         c = int(np.argmax(np.abs(np.nan_to_num(dev[k], posinf=np.inf))))
-        why = (f"tracker glitch: {size[k]:.4g} mm from its neighbours' midpoint, "
-               f"{size[k] / max(scale, 1e-12):.3g} times the recording's median")
+        why = (
+            f"tracker glitch: {size[k]:.4g} mm from its neighbours' midpoint, "
+            f"{size[k] / max(scale, 1e-12):.3g} times the recording's median"
+        )
         out[int(k) + 1] = (cols[c], why)
     return out
 
@@ -393,14 +438,16 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
     path, header, body = _read_table(path)
     name = path.name
     if any(_SERVO.match(h) for h in header) or "pattern_label" in header:
-        raise DataError(f"{name} looks like an OpenCR recording (servo_<id>_mm / pattern_label columns): "
-                        "use --format opencr")
+        raise DataError(
+            f"{name} looks like an OpenCR recording (servo_<id>_mm / pattern_label columns): use --format opencr"
+        )
     qcols = _wire_columns(name, header)
     if not qcols:
         raise DataError(f"{name}: missing the wire columns q1..qn (header: {', '.join(header)})")
     if n_wires is not None and len(qcols) != n_wires:
-        raise DataError(f"the design has {n_wires} wires but {name} has {len(qcols)} wire columns "
-                        f"({qcols[0]}..{qcols[-1]})")
+        raise DataError(
+            f"the design has {n_wires} wires but {name} has {len(qcols)} wire columns ({qcols[0]}..{qcols[-1]})"
+        )
     need = ["sample", *qcols, *FORCE_COLS, *POS_COLS, *ROT_COLS]
     for c in need:
         if c not in header:
@@ -410,8 +457,16 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
     for c in qcols:
         if length is not None:
             for i in np.flatnonzero(np.abs(v[c]) >= length):
-                bad.setdefault(int(i), (c, (f"wire displacement {v[c][i]:g} mm is not smaller than the robot's "
-                                           f"length {length:g} mm (non-physical)")))
+                bad.setdefault(
+                    int(i),
+                    (
+                        c,
+                        (
+                            f"wire displacement {v[c][i]:g} mm is not smaller than the robot's "
+                            f"length {length:g} mm (non-physical)"
+                        ),
+                    ),
+                )
     for c in FORCE_COLS:
         for i in np.flatnonzero(np.abs(v[c]) > MAX_FORCE_N):
             bad.setdefault(int(i), (c, f"force {v[c][i]:g} N exceeds {MAX_FORCE_N:g} N (non-physical)"))
@@ -435,17 +490,31 @@ def read_csv(path, n_wires: int | None = None, length: float | None = None, drop
     back = np.flatnonzero(np.diff(sample[good]) <= 0)
     if back.size:
         i = good[back[0] + 1]
-        raise DataError(f"{name}: column 'sample', row {i + 1}: samples must be in acquisition order "
-                        f"(increasing), got {_fmt(sample[i])} after {_fmt(sample[good[back[0]]])}")
+        raise DataError(
+            f"{name}: column 'sample', row {i + 1}: samples must be in acquisition order "
+            f"(increasing), got {_fmt(sample[i])} after {_fmt(sample[good[back[0]]])}"
+        )
     for d in dropped:
         d["sample"] = _fmt(sample[d["row"] - 1])
-    good, more = _drop_glitches(good, np.stack([cols[c][good] for c in POS_COLS], axis=1),
-                                np.stack([cols[c][good] for c in qcols], axis=1), POS_COLS,
-                                lambda i: {"row": int(i) + 1, "sample": _fmt(sample[i])})
+    good, more = _drop_glitches(
+        good,
+        np.stack([cols[c][good] for c in POS_COLS], axis=1),
+        np.stack([cols[c][good] for c in qcols], axis=1),
+        POS_COLS,
+        lambda i: {"row": int(i) + 1, "sample": _fmt(sample[i])},
+    )
     dropped = tuple(dropped) + more
     stack = lambda cs: np.stack([cols[c][good] for c in cs], axis=1)
-    return Dataset(sample=sample[good].astype(np.int64), q=stack(qcols), f=stack(FORCE_COLS), p=stack(POS_COLS),
-                   rot=stack(ROT_COLS), frame="base", dropped=dropped, source=str(path))
+    return Dataset(
+        sample=sample[good].astype(np.int64),
+        q=stack(qcols),
+        f=stack(FORCE_COLS),
+        p=stack(POS_COLS),
+        rot=stack(ROT_COLS),
+        frame="base",
+        dropped=dropped,
+        source=str(path),
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -458,8 +527,10 @@ def servo_map_from_labels(name: str, labels) -> dict[int, int]:
         for t, s in _TENDON.findall(lab):
             t, s = int(t), int(s)
             if out.get(t, s) != s:
-                raise DataError(f"{name}: column 'pattern_label', row {row}: tendon {t} is driven by servo {s} "
-                                f"here but by servo {out[t]} earlier ({lab!r})")
+                raise DataError(
+                    f"{name}: column 'pattern_label', row {row}: tendon {t} is driven by servo {s} "
+                    f"here but by servo {out[t]} earlier ({lab!r})"
+                )
             out[t] = s
     return out
 
@@ -477,11 +548,15 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
     name = path.name
     servo_cols = {int(m.group(1)): h for h in header if (m := _SERVO.match(h))}
     if not servo_cols and any(re.fullmatch(r"q\d+", h) for h in header):
-        raise DataError(f"{name} looks like a tension_zones/MODEL.md measurement set (q1..qn columns): use --format model")
+        raise DataError(
+            f"{name} looks like a tension_zones/MODEL.md measurement set (q1..qn columns): use --format model"
+        )
     for col in ("timestamp", "pattern_label", *TIP_COLS):
         if col not in header:
-            raise DataError(f"{name}: missing column {col!r} (an OpenCR recording has timestamp, pattern_label, "
-                            "servo_<id>_mm and tip_x, tip_y, tip_z)")
+            raise DataError(
+                f"{name}: missing column {col!r} (an OpenCR recording has timestamp, pattern_label, "
+                "servo_<id>_mm and tip_x, tip_y, tip_z)"
+            )
     if not servo_cols:
         raise DataError(f"{name}: no servo_<id>_mm columns")
     li = header.index("pattern_label")
@@ -490,9 +565,11 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
         servo_of = servo_map_from_labels(name, labels)
         missing = [t for t in range(len(servo_cols)) if t not in servo_of]
         if missing:
-            raise DataError(f"{name}: no pattern label 'tendon{missing[0]}_id<servo>' says which servo drives "
-                            f"tendon {missing[0]}: the map comes from the single-tendon pulls' labels (is the file "
-                            "truncated?); a validation file takes its training file's map")
+            raise DataError(
+                f"{name}: no pattern label 'tendon{missing[0]}_id<servo>' says which servo drives "
+                f"tendon {missing[0]}: the map comes from the single-tendon pulls' labels (is the file "
+                "truncated?); a validation file takes its training file's map"
+            )
         servo_ids = [servo_of[t] for t in range(len(servo_cols))]
     servo_ids = tuple(int(s) for s in servo_ids)
     if len(set(servo_ids)) != len(servo_ids):
@@ -516,29 +593,46 @@ def read_opencr(path, n_wires: int | None = None, servo_ids=None, drop_bad: bool
         if i in bad:
             continue
         if t[i] <= last:
-            bad[i] = ("timestamp", (f"{_fmt(t[i])} is not after the previous row's {_fmt(last)} "
-                                   "(samples must be in acquisition order)"))
+            bad[i] = (
+                "timestamp",
+                (f"{_fmt(t[i])} is not after the previous row's {_fmt(last)} (samples must be in acquisition order)"),
+            )
         else:
             last = t[i]
     dropped = _resolve_bad(name, bad, len(body), drop_bad, lambda i: "")
     for d in dropped:
         d["sample"] = str(d["row"])
     good = np.flatnonzero(~np.isin(np.arange(len(body)), list(bad)))
-    good, more = _drop_glitches(good, np.stack([cols[c][good] for c in TIP_COLS], axis=1),
-                                np.stack([cols[c][good] for c in scols], axis=1), TIP_COLS,
-                                lambda i: {"row": int(i) + 1, "sample": str(int(i) + 1)})
+    good, more = _drop_glitches(
+        good,
+        np.stack([cols[c][good] for c in TIP_COLS], axis=1),
+        np.stack([cols[c][good] for c in scols], axis=1),
+        TIP_COLS,
+        lambda i: {"row": int(i) + 1, "sample": str(int(i) + 1)},
+    )
     dropped = tuple(dropped) + more
     q = -np.stack([cols[c][good] for c in scols], axis=1)
     p = np.stack([cols[c][good] for c in TIP_COLS], axis=1)
     labs = tuple(labels[i] for i in good)
-    return Dataset(sample=good.astype(np.int64) + 1, q=q, f=np.zeros((len(good), 3)), p=p, rot=None,
-                   frame="tracker", groups=tuple(re.sub(r"_hold$", "", s) for s in labs),
-                   timestamp=t[good], servo_ids=servo_ids, dropped=dropped, source=str(path))
+    return Dataset(
+        sample=good.astype(np.int64) + 1,
+        q=q,
+        f=np.zeros((len(good), 3)),
+        p=p,
+        rot=None,
+        frame="tracker",
+        groups=tuple(re.sub(r"_hold$", "", s) for s in labs),
+        timestamp=t[good],
+        servo_ids=servo_ids,
+        dropped=dropped,
+        source=str(path),
+    )
 
 
 def shared_rows(train: Dataset, other: Dataset) -> int:
     """How many samples of ``other`` repeat one of ``train`` (the same commands and the same tip position,
     to :data:`SHARED_DECIMALS` decimals): independent recordings share none."""
+
     def rows(d):
         return np.round(np.concatenate([d.q, d.p], axis=1), SHARED_DECIMALS)
 
@@ -554,9 +648,11 @@ def check_validation(train: Dataset, validate: Dataset) -> None:
     k = shared_rows(train, validate)
     if k > MAX_SHARED_FRACTION * validate.n_samples:
         same = "; the same recording" if k == validate.n_samples == train.n_samples else ""
-        raise DataError(f"validation file {Path(validate.source).name}: {k} of its {validate.n_samples} rows repeat "
-                        f"rows of the training file {Path(train.source).name} (same commands and tip positions"
-                        f"{same}); a validation must be a separate recording")
+        raise DataError(
+            f"validation file {Path(validate.source).name}: {k} of its {validate.n_samples} rows repeat "
+            f"rows of the training file {Path(train.source).name} (same commands and tip positions"
+            f"{same}); a validation must be a separate recording"
+        )
 
 
 #: ``--format`` -> reader. A reader takes ``(path, n_wires=, drop_bad=)`` (and may take more keywords).

@@ -78,8 +78,7 @@ def noise_floor(data: Dataset, residual: np.ndarray | None = None) -> dict:
         d = (residual[:-2] - 2 * residual[1:-1] + residual[2:]) / math.sqrt(6.0)
         sig, used = _trimmed_sigma(d)
         method = "second differences of the residual along the acquisition order"
-    return {"sigma_mm": sig.tolist(), "floor_mm": float(np.sqrt(np.sum(sig**2))),
-            "method": method, "pairs": used}
+    return {"sigma_mm": sig.tolist(), "floor_mm": float(np.sqrt(np.sum(sig**2))), "method": method, "pairs": used}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -132,11 +131,11 @@ def _knn(X: np.ndarray, k: int, rng) -> np.ndarray:
     rows = max(1, 2**22 // max(m, 1))
     out = np.empty((m, k), dtype=np.intp)
     for i in range(0, m, rows):
-        d2 = np.sum((X[i:i + rows, None, :] - X[None, :, :]) ** 2, axis=-1)
+        d2 = np.sum((X[i : i + rows, None, :] - X[None, :, :]) ** 2, axis=-1)
         d2[np.arange(len(d2)), np.arange(i, i + len(d2))] = np.inf
         # ties (e.g. all unloaded samples) broken at random, not by index: an index order would smuggle
         # the acquisition order into another feature (drawn block by block: the same stream as whole)
-        out[i:i + rows] = np.argpartition(d2 + 1e-12 * rng.random(d2.shape), k - 1, axis=1)[:, :k]
+        out[i : i + rows] = np.argpartition(d2 + 1e-12 * rng.random(d2.shape), k - 1, axis=1)[:, :k]
     return out
 
 
@@ -150,8 +149,9 @@ def _loo_sse(rr: np.ndarray, nb: np.ndarray):
     return np.sum((rr - smooth / nb.shape[1]) ** 2, axis=(-2, -1))
 
 
-def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: int = 1000,
-                   seed: int = 0, k: int | None = None) -> dict:
+def structure_test(
+    resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: int = 1000, seed: int = 0, k: int | None = None
+) -> dict:
     """Is the residual (M, 3) predictable from each feature beyond noise?
 
     Returns ``{feature: {"explained": fraction of the residual's variance a leave-one-out k-NN smoother
@@ -176,7 +176,7 @@ def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: in
     for name, x in feats.items():
         nb = _knn(_embed(name, x), k, rng)
         stat = _loo_sse(r, nb)
-        null = np.concatenate([_loo_sse(r[perms[i:i + batch]], nb) for i in range(0, n_perm, batch)])
+        null = np.concatenate([_loo_sse(r[perms[i : i + batch]], nb) for i in range(0, n_perm, batch)])
         sd = max(float(np.std(null)), 1e-300)
         out[name] = {"explained": float(1.0 - stat / total), "z": float((np.mean(null) - stat) / sd)}
     mean = resid.mean(axis=0)
@@ -185,8 +185,14 @@ def structure_test(resid: np.ndarray, feats: dict, sigma: np.ndarray, n_perm: in
     return out
 
 
-def score_test(r_h: np.ndarray, J_h: np.ndarray, active_cols: np.ndarray, cand_cols: np.ndarray,
-               sigma: np.ndarray, weights: np.ndarray | None = None) -> dict:
+def score_test(
+    r_h: np.ndarray,
+    J_h: np.ndarray,
+    active_cols: np.ndarray,
+    cand_cols: np.ndarray,
+    sigma: np.ndarray,
+    weights: np.ndarray | None = None,
+) -> dict:
     """Score (Lagrange-multiplier) test of a candidate on held-out residuals.
 
     Args:
@@ -223,7 +229,7 @@ def previous_excursion(p, index, centre, back: int) -> np.ndarray:
     where a memory of the path would leave the robot."""
     u = np.empty((len(index), 3))
     for j, i in enumerate(index):  # (a few dozen samples: a loop over them, not over poses)
-        exc = p[i - back:i] - centre
+        exc = p[i - back : i] - centre
         e = exc[np.argmax(np.linalg.norm(exc, axis=1))]
         u[j] = e / max(np.linalg.norm(e), 1e-12)
     return u
@@ -246,14 +252,20 @@ def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
     """
     q, p = np.asarray(data.q, float), np.asarray(data.p, float)
     timed = data.timestamp is not None
-    t = (np.asarray(data.timestamp, float) - float(data.timestamp[0])) / 60.0 if data.timestamp is not None else np.arange(len(q), dtype=float)
+    t = (
+        (np.asarray(data.timestamp, float) - float(data.timestamp[0])) / 60.0
+        if data.timestamp is not None
+        else np.arange(len(q), dtype=float)
+    )
     session = np.zeros(len(q), int) if data.session is None else np.asarray(data.session)
     start = np.r_[0, np.flatnonzero(np.diff(session)) + 1]  # each session's first sample
     first = start[np.searchsorted(start, np.arange(len(q)), side="right") - 1]
     home = np.flatnonzero((np.abs(q).max(axis=1) < home_mm) & (np.arange(len(q)) - first >= back))
     if len(home) < 8:
-        raise ValueError(f"{len(home)} home samples (every wire within {home_mm} mm of zero, {back} samples "
-                         "into a session): too few to tell memory from drift")
+        raise ValueError(
+            f"{len(home)} home samples (every wire within {home_mm} mm of zero, {back} samples "
+            "into a session): too few to tell memory from drift"
+        )
     centre = np.median(p[home], axis=0)
     u = previous_excursion(p, home, centre, back)
     # unknowns (c, m, v): 7; rows: 3 per home sample
@@ -262,8 +274,16 @@ def home_memory(data: Dataset, home_mm: float = 0.35, back: int = 15) -> dict:
     sol, *_ = np.linalg.lstsq(A, p[home].reshape(-1), rcond=None)
     e = p[home].reshape(-1) - A @ sol
     std = np.sqrt(np.diag(np.linalg.pinv(A.T @ A)) * (e @ e) / max(A.shape[0] - A.shape[1], 1))
-    return {"n": K, "index": home, "direction": u,
-            "spread_mm": rmse(p[home] - centre),
-            "along_mm": float(sol[3]), "along_std_mm": float(std[3]),
-            "across_mm": float(np.sqrt(np.mean(e**2) * 3)), "drift_mm": sol[4:7], "drift_std_mm": std[4:7],
-            "time_unit": "minute" if timed else "sample", "span": float(t[-1] - t[0])}
+    return {
+        "n": K,
+        "index": home,
+        "direction": u,
+        "spread_mm": rmse(p[home] - centre),
+        "along_mm": float(sol[3]),
+        "along_std_mm": float(std[3]),
+        "across_mm": float(np.sqrt(np.mean(e**2) * 3)),
+        "drift_mm": sol[4:7],
+        "drift_std_mm": std[4:7],
+        "time_unit": "minute" if timed else "sample",
+        "span": float(t[-1] - t[0]),
+    }

@@ -160,8 +160,10 @@ class Fits:
             return 0.0, 0.0, 0
         th1 = self.fit(theta0, active, self.w_early)
         th0 = self.fit(theta_base, base_active, self.w_early)
-        sse = [float(np.sum(self.pb.residuals(th, a, samples=self.late_idx) ** 2))
-               for th, a in ((th1, active), (th0, base_active))]
+        sse = [
+            float(np.sum(self.pb.residuals(th, a, samples=self.late_idx) ** 2))
+            for th, a in ((th1, active), (th0, base_active))
+        ]
         return sse[0], sse[1], len(self.late_idx)
 
     def refit_all(self, theta0, active, residuals: bool = True):
@@ -251,10 +253,14 @@ class Runner:
             from concurrent.futures import ProcessPoolExecutor
 
             self.pool = ProcessPoolExecutor(
-                workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start,
-                initargs=(problem_args, fits.train, fits.held, fits.robust))
-            self._warm = {k: self.pool.submit(_job, "warm", None, (list(a), part))
-                          for k, (a, part) in (warm or {}).items()}
+                workers,
+                mp_context=multiprocessing.get_context("spawn"),
+                initializer=_start,
+                initargs=(problem_args, fits.train, fits.held, fits.robust),
+            )
+            self._warm = {
+                k: self.pool.submit(_job, "warm", None, (list(a), part)) for k, (a, part) in (warm or {}).items()
+            }
 
     def __enter__(self):
         return self

@@ -180,21 +180,32 @@ class Result:
             "steps": self.steps,
             "unexplained_structure": self.unexplained_structure,
             "structure": self.structure,
-            "parameters": {**final_parameters(pb, self.theta_after, self.active),
-                           "std": pb.describe_std(self.theta_after, self.active, self.std_after),
-                           "at_bound": self.at_bound},
+            "parameters": {
+                **final_parameters(pb, self.theta_after, self.active),
+                "std": pb.describe_std(self.theta_after, self.active, self.std_after),
+                "at_bound": self.at_bound,
+            },
             "correlations": self.correlations,
-            "model": {"blocks": [b.name for b in pb.spec.blocks], "active": list(self.active),
-                      "theta": np.asarray(self.theta_after).tolist(), "clock": pb.clock},
+            "model": {
+                "blocks": [b.name for b in pb.spec.blocks],
+                "active": list(self.active),
+                "theta": np.asarray(self.theta_after).tolist(),
+                "clock": pb.clock,
+            },
             "seconds": self.seconds,
         }
         out["knife_edges"] = knife_edges(self.rounds)
-        out["bound_warnings"] = bound_lines(self.at_bound, pb.describe(self.theta_after, self.active),
-                                            pb.describe(self.theta_declared, self.active))
+        out["bound_warnings"] = bound_lines(
+            self.at_bound, pb.describe(self.theta_after, self.active), pb.describe(self.theta_declared, self.active)
+        )
         out["warnings"] = caveats(out)
         if self.val.any():
-            out.update(n_validate=int(self.val.sum()), rmse_validate_mm=self.rmse["validate"],
-                       rmse_validate_aligned_mm=self.rmse["validate_aligned"], baselines=self.baselines)
+            out.update(
+                n_validate=int(self.val.sum()),
+                rmse_validate_mm=self.rmse["validate"],
+                rmse_validate_aligned_mm=self.rmse["validate_aligned"],
+                baselines=self.baselines,
+            )
         return out
 
 
@@ -255,14 +266,29 @@ def _flagged(structure: dict) -> bool:
     :func:`_excess`) says the model lacks something: structure along an input, an offset, or an error
     clearly above the noise floor."""
     ex = structure["excess_over_noise"]
-    return bool(any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
-                or (ex["ratio_to_floor"] > EXCESS_RATIO and ex["z"] > STRUCTURE_Z))
+    return bool(
+        any(v["z"] > STRUCTURE_Z for k, v in structure.items() if k != "excess_over_noise")
+        or (ex["ratio_to_floor"] > EXCESS_RATIO and ex["z"] > STRUCTURE_Z)
+    )
 
 
-def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None, library=None, nominal=None,
-              holdout: float = 0.25, robust: bool = False, alpha: float = 1e-3, min_gain: float = 0.01,
-              min_excess: float = 0.25, max_rounds: int | None = None, log=None,
-              workers: int | None = None, register: bool = True) -> Result:
+def calibrate(
+    data: Dataset,
+    robot,
+    validate: Dataset | None = None,
+    model=None,
+    library=None,
+    nominal=None,
+    holdout: float = 0.25,
+    robust: bool = False,
+    alpha: float = 1e-3,
+    min_gain: float = 0.01,
+    min_excess: float = 0.25,
+    max_rounds: int | None = None,
+    log=None,
+    workers: int | None = None,
+    register: bool = True,
+) -> Result:
     """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
 
     ``validate``: a second recording of the same robot, only predicted after the selection.
@@ -280,8 +306,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     if validate is not None:
         validate.check_against(robot, moving=False)
         check_validation(data, validate)
-    n_workers = worker_count(workers, (data.n_samples + (0 if validate is None else validate.n_samples))
-                             * robot.n_segments)
+    n_workers = worker_count(
+        workers, (data.n_samples + (0 if validate is None else validate.n_samples)) * robot.n_segments
+    )
     library = default_library(data.frame) if library is None else tuple(library)
     nominal = default_nominal(data.frame) if nominal is None else tuple(nominal)
     # constant curvature; the rod variant (segments in pieces) only while an effect needs it (Problem)
@@ -296,8 +323,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
     reg = None
     if register:
         recorded = data if validate is None else data.concat(validate)
-        reg = _register(Problem(model, robot, recorded, blocks, clock=clock), data, train,
-                        [b.name for b in nominal], library)
+        reg = _register(
+            Problem(model, robot, recorded, blocks, clock=clock), data, train, [b.name for b in nominal], library
+        )
         say(f"global registration: {reg.reason}")
     if reg is not None and reg.applied:  # the loop runs in the robot's base frame
         data = reg.to_base(data)
@@ -352,10 +380,11 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         # the inputs the structure test looks along (from the nominal fit: the same for every model)
         feats = features(full, _base_frame_prediction(pb, theta_before, nominal_names))
         held_feats = {k: v[held] for k, v in feats.items()}
-        say(f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
-            f"noise floor {noise['floor_mm']:.4f} mm")
-        main = _Branch(theta=theta, err=err, plain=plain, active=list(active),
-                       models=[(list(active), theta.copy())])
+        say(
+            f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
+            f"noise floor {noise['floor_mm']:.4f} mm"
+        )
+        main = _Branch(theta=theta, err=err, plain=plain, active=list(active), models=[(list(active), theta.copy())])
         max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
         blocks = {b.name: b for b in pb.spec.blocks}
         # two held-out errors closer than this (their sum-of-squares difference, in ``unit_of``) are a
@@ -394,7 +423,9 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
             r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(held))
             for name in recalled:
-                J_held[..., sl[name]] = pb.jacobian(theta, active + [name], samples=np.flatnonzero(held))[1][..., sl[name]]
+                J_held[..., sl[name]] = pb.jacobian(theta, active + [name], samples=np.flatnonzero(held))[1][
+                    ..., sl[name]
+                ]
             active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
             wts = glitch_weights(r_held, sigma) if robust else None
             # the score test's null is "what is left is noise"; far above the noise floor, what is left is
@@ -405,11 +436,27 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             scores = []
             for name in remaining:
                 s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
-                scores.append({"round": rnd, "name": name, "score": s["score"], "dof": s["dof"],
-                               "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0))})
+                scores.append(
+                    {
+                        "round": rnd,
+                        "name": name,
+                        "score": s["score"],
+                        "dof": s["dof"],
+                        "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0)),
+                    }
+                )
             scores.sort(key=lambda d: -d["score"])
-            scores += [{"round": rnd, "name": n, "score": 0.0, "dof": int(sl[n].stop - sl[n].start),
-                        "explained_rmse_mm": 0.0, "not_scored": "the model has no load"} for n in idle]
+            scores += [
+                {
+                    "round": rnd,
+                    "name": n,
+                    "score": 0.0,
+                    "dof": int(sl[n].stop - sl[n].start),
+                    "explained_rmse_mm": 0.0,
+                    "not_scored": "the model has no load",
+                }
+                for n in idle
+            ]
             st.candidates.extend(scores)
             z_crit = _norm_isf(alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
             say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
@@ -430,15 +477,21 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
             # structure that a geometry change took half of: the model's own discretisation.)
             excess = _excess(plain, err, noise, m)
-            second_look = (not significant and excess["ratio_to_floor"] > EXCESS_RATIO
-                           and _flagged({**structure_test(r[held], held_feats, sigma), "excess_over_noise": excess}))
+            second_look = (
+                not significant
+                and excess["ratio_to_floor"] > EXCESS_RATIO
+                and _flagged({**structure_test(r[held], held_feats, sigma), "excess_over_noise": excess})
+            )
             if second_look:
                 significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s]
                 for s in significant:
                     s["second_look"] = True
             unit = unit_of(err)
-            if second_look or len(significant) > TRIES_PER_ROUND or (len(significant) > 1 and any(
-                    blocks[s["name"]].pieces_for(model) > 1 for s in significant)):
+            if (
+                second_look
+                or len(significant) > TRIES_PER_ROUND
+                or (len(significant) > 1 and any(blocks[s["name"]].pieces_for(model) > 1 for s in significant))
+            ):
                 # screen: a short refit of every significant candidate, then the full refits of the best
                 # (also where fewer are significant but one of them is the rod's, whose full refit costs
                 # as much as several of the others')
@@ -456,14 +509,15 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                     s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
                     s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
                     s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
-                significant = sorted((s for s in significant if not s["screened_out"]),
-                                     key=lambda s: s["screened_rmse_mm"])
+                significant = sorted(
+                    (s for s in significant if not s["screened_out"]), key=lambda s: s["screened_rmse_mm"]
+                )
             chosen = significant[:TRIES_PER_ROUND]
             jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
             # an effect of the clock must also predict the later samples from the earlier ones
             timed = [i for i, s in enumerate(chosen) if getattr(blocks[s["name"]], "of_time", False)]
             done = run.map("refit", jobs) + run.map("later", [(*jobs[i], theta, active) for i in timed])
-            later = dict(zip(timed, done[len(jobs):]))
+            later = dict(zip(timed, done[len(jobs) :]))
             for i, (s, (th_new, plain_new, err_new, r_new)) in enumerate(zip(chosen, done)):
                 drop = (err**2 - err_new**2) * m / unit
                 need = chi2_quantile(alpha, max(s["dof"], 1))
@@ -474,27 +528,56 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
                 share, share_train = _share(err, err_new, noise["floor_mm"]), _share(tr0, tr1, noise["floor_mm"])
                 share_needed = 0.0 if st.relaxed else _share_needed(min_excess, err, noise["floor_mm"])
-                tests = (drop > need and err_new < (1.0 - min_gain) * err and drop_train > need
-                         and (not s.get("second_look") or share >= SECOND_LOOK_SHARE))
+                tests = (
+                    drop > need
+                    and err_new < (1.0 - min_gain) * err
+                    and drop_train > need
+                    and (not s.get("second_look") or share >= SECOND_LOOK_SHARE)
+                )
                 extra = {}
                 if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
                     sse_with, sse_without, n_late = later[i]
                     extra = {"sse_drop_later": (sse_without - sse_with) / unit, "n_later": n_late}
                     tests = tests and extra["sse_drop_later"] > need
                 ok = tests and share >= share_needed
-                tried.append({"name": s["name"], "rmse_held_out_mm": plain_new, "rmse_train_mm": rmse(r_new[train]),
-                              "share_held_out": share, "share_needed": share_needed, "share_train": share_train,
-                              "sse_drop": drop, "sse_drop_train": drop_train, **extra,
-                              "needed": need, "significant": bool(ok), "short_of_share": bool(tests and not ok),
-                              "theta": th_new, "err": err_new, "score": s["score"]})
-                say(f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
-                    f"{' significant' if ok else ' short of the share' if tests else ''}")
+                tried.append(
+                    {
+                        "name": s["name"],
+                        "rmse_held_out_mm": plain_new,
+                        "rmse_train_mm": rmse(r_new[train]),
+                        "share_held_out": share,
+                        "share_needed": share_needed,
+                        "share_train": share_train,
+                        "sse_drop": drop,
+                        "sse_drop_train": drop_train,
+                        **extra,
+                        "needed": need,
+                        "significant": bool(ok),
+                        "short_of_share": bool(tests and not ok),
+                        "theta": th_new,
+                        "err": err_new,
+                        "score": s["score"],
+                    }
+                )
+                say(
+                    f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
+                    f"{' significant' if ok else ' short of the share' if tests else ''}"
+                )
             good = sorted((t for t in tried if t["significant"]), key=lambda t: t["err"])
-            info = {"round": rnd, "z_critical": z_crit, "rmse_held_out_mm": plain_start, "rmse_train_mm": rmse(r[train])}
+            info = {
+                "round": rnd,
+                "z_critical": z_crit,
+                "rmse_held_out_mm": plain_start,
+                "rmse_train_mm": rmse(r[train]),
+            }
             short = sorted((t for t in tried if t["short_of_share"]), key=lambda t: t["err"])
             if not good and short:  # the joint look may go on from here (step 4)
                 st.shortfall = (copy.deepcopy(st), copy.deepcopy(tried), short[0]["name"], info)
-            if ties is not None and len(good) > 1 and (good[1]["err"] ** 2 - good[0]["err"] ** 2) * m / unit < resolution:
+            if (
+                ties is not None
+                and len(good) > 1
+                and (good[1]["err"] ** 2 - good[0]["err"] ** 2) * m / unit < resolution
+            ):
                 # the test cannot tell the two apart: the look-ahead may go on from the runner-up
                 ties.append((copy.deepcopy(st), copy.deepcopy(tried), good[1]["name"], info))
             return keep(st, tried, good[0] if good else None, info)
@@ -506,14 +589,21 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             if accepted is not None:
                 st.theta, st.err, st.plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
                 st.active.append(accepted["name"])
-                st.effects.append({"name": accepted["name"], "rmse_after_mm": accepted["rmse_held_out_mm"],
-                                   "score": accepted["score"]})
+                st.effects.append(
+                    {
+                        "name": accepted["name"],
+                        "rmse_after_mm": accepted["rmse_held_out_mm"],
+                        "score": accepted["score"],
+                    }
+                )
                 say(f"  kept {accepted['name']}")
                 # backward step: an earlier effect that only stood in for the one just added goes
                 # (the refits without each earlier effect run at once; the first that passes is taken)
                 earlier = [e for e in st.effects if e["name"] != accepted["name"]]
-                jobs = [(_reset(st.theta, sl[e["name"]], pb.null), [a for a in st.active if a != e["name"]])
-                        for e in earlier]
+                jobs = [
+                    (_reset(st.theta, sl[e["name"]], pb.null), [a for a in st.active if a != e["name"]])
+                    for e in earlier
+                ]
                 for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, run.map("refit_held_only", jobs)):
                     rise = (err_wo**2 - st.err**2) * m / unit_of(st.err)
                     need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
@@ -521,14 +611,17 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                     if rise < need:
                         st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
                         st.effects = [x for x in st.effects if x["name"] != e["name"]]
-                        removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise,
-                                        "needed": need})
+                        removed.append(
+                            {"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise, "needed": need}
+                        )
                         say(f"  removed {e['name']}")
                         break
                 st.models.append((list(st.active), st.theta.copy()))
             name = None if accepted is None else accepted["name"]
-            tried = [{**{k: v for k, v in t.items() if k not in ("theta", "err", "score")},
-                      "accepted": t["name"] == name} for t in tried]
+            tried = [
+                {**{k: v for k, v in t.items() if k not in ("theta", "err", "score")}, "accepted": t["name"] == name}
+                for t in tried
+            ]
             st.rounds.append({**info, "tried": tried, "accepted": name, "removed": removed})
             st.trail.append(st.err)
             return accepted is not None
@@ -570,14 +663,24 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             need = chi2_quantile(alpha, max(dof, 1))
             share_needed = _share_needed(min_excess, end[1], noise["floor_mm"])  # as for one effect
             ok = bool(added) and share >= share_needed and drop > need
-            jl = {"first": first, "effects": alt.active[len(nominal_names):], "added": added,
-                  "removed": [a for a in st.active if a not in alt.active], "rmse_held_out_mm": end_alt[0],
-                  "rmse_before_mm": end[0],
-                  "share_held_out": share, "share_needed": share_needed, "sse_drop": drop, "needed": need,
-                  "kept": ok}
-            say(f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
+            jl = {
+                "first": first,
+                "effects": alt.active[len(nominal_names) :],
+                "added": added,
+                "removed": [a for a in st.active if a not in alt.active],
+                "rmse_held_out_mm": end_alt[0],
+                "rmse_before_mm": end[0],
+                "share_held_out": share,
+                "share_needed": share_needed,
+                "sse_drop": drop,
+                "needed": need,
+                "kept": ok,
+            }
+            say(
+                f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
                 f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * share_needed:.0f} %)"
-                f"{': kept' if ok else ''}")
+                f"{': kept' if ok else ''}"
+            )
             if ok:
                 st, end = alt, end_alt
             st.rounds[k - 1]["joint_look"] = jl
@@ -600,10 +703,20 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             first = next(t["name"] for t in st.rounds[k - 1]["tried"] if t["accepted"])
             keep(before, tried_t, next(t for t in tried_t if t["name"] == runner), info)
             alt = select(before, None, ahead_of=st.trail)
-            other = {"first": runner, "effects": alt.active[len(nominal_names):], "rmse_held_out_mm": alt.plain}
-            la = {"branches": [{"first": first, "effects": st.active[len(nominal_names):], "rmse_held_out_mm": end[0],
-                                "unexplained_structure": _flagged(end[3])}, other],
-                  "needed": resolution, "kept": first}
+            other = {"first": runner, "effects": alt.active[len(nominal_names) :], "rmse_held_out_mm": alt.plain}
+            la = {
+                "branches": [
+                    {
+                        "first": first,
+                        "effects": st.active[len(nominal_names) :],
+                        "rmse_held_out_mm": end[0],
+                        "unexplained_structure": _flagged(end[3]),
+                    },
+                    other,
+                ],
+                "needed": resolution,
+                "kept": first,
+            }
             if alt.behind:
                 other["behind_after_round"] = alt.behind
                 say(f"  {runner}: behind after round {alt.behind} ({alt.plain:.4f} mm held out): given up")
@@ -614,14 +727,25 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
                 la["sse_drop"] = (end[1] ** 2 - end_alt[1] ** 2) * m / unit_of(end[1])
                 if la["sse_drop"] > resolution:
                     st, end, la["kept"] = alt, end_alt, runner
-                say(f"  {runner}: held-out {end_alt[0]:.4f} mm against {end[0]:.4f} mm (drop "
-                    f"{la['sse_drop']:.1f}, needed {resolution:.1f}): kept the branch of {la['kept']}")
+                say(
+                    f"  {runner}: held-out {end_alt[0]:.4f} mm against {end[0]:.4f} mm (drop "
+                    f"{la['sse_drop']:.1f}, needed {resolution:.1f}): kept the branch of {la['kept']}"
+                )
             st.rounds[k - 1]["look_ahead"] = la
-        if (st.shortfall is not None and _flagged(end[3])
-                and end[3]["excess_over_noise"]["ratio_to_floor"] > EXCESS_SCALE):
+        if (
+            st.shortfall is not None
+            and _flagged(end[3])
+            and end[3]["excess_over_noise"]["ratio_to_floor"] > EXCESS_SCALE
+        ):
             st, end = joint_look(st, end)
-        theta, active, effects, candidates, rounds, models = (st.theta, st.active, st.effects, st.candidates,
-                                                              st.rounds, st.models)
+        theta, active, effects, candidates, rounds, models = (
+            st.theta,
+            st.active,
+            st.effects,
+            st.candidates,
+            st.rounds,
+            st.models,
+        )
 
         # the selection is over: the structure left, on the held-out residual of the model fitted
         # without those samples
@@ -643,8 +767,13 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
         corr = correlations(J_final, free, w_all, pb.labels(active))
         # structure left, or the held-out error clearly above the noise floor (``ending``: ``_excess``)
         unexplained = _flagged(structure)
-        rmse_d = {"declared": rmse(r_decl[held]), "before": rmse_before, "after": plain_after,
-                  "train_after": rmse(r_after[train]), "refit": rmse(r_final[train | held])}
+        rmse_d = {
+            "declared": rmse(r_decl[held]),
+            "before": rmse_before,
+            "after": plain_after,
+            "train_after": rmse(r_after[train]),
+            "refit": rmse(r_final[train | held]),
+        }
         steps = []
         families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
         for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
@@ -652,26 +781,55 @@ def calibrate(data: Dataset, robot, validate: Dataset | None = None, model=None,
             rr = r_after if last else pb.residuals(th, act)
             # the validation file by the model refitted on every sample, as the final one (the last is it)
             rv = rr if not val.any() else r_final if last else done[1 + i][1]
-            step = {"effects": act[len(nominal_names):], "rmse_held_out_mm": rmse(rr[held]),
-                    "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
-                    "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None}
+            step = {
+                "effects": act[len(nominal_names) :],
+                "rmse_held_out_mm": rmse(rr[held]),
+                "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
+                "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None,
+            }
             if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
                 step["rmse_by_family_mm"] = {
                     part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
-                    for part, mask, r in (("held_out", held, rr), ("validate", val, rv)) if mask.any()}
+                    for part, mask, r in (("held_out", held, rr), ("validate", val, rv))
+                    if mask.any()
+                }
             steps.append(step)
         bl = None
         if val.any():
             rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
             bl = baselines(full, train, held, val)
-            say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
-        return Result(problem=pb, train=train, held=held, val=val, holdout=data.split_description(holdout),
-                      noise=noise, theta_declared=theta_decl, theta_before=theta_before, theta_selected=theta_sel,
-                      theta_after=theta,
-                      std_after=std, nominal=nominal_names, active=active, effects=effects, candidates=candidates,
-                      rounds=rounds, steps=steps, structure=structure, rmse=rmse_d, unexplained_structure=unexplained,
-                      robust=robust, correlations=corr, at_bound=pb.at_bounds(theta, active), features=feats,
-                      baselines=bl, seconds=time.perf_counter() - t0, registration=reg)
+            say(
+                f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)"
+            )
+        return Result(
+            problem=pb,
+            train=train,
+            held=held,
+            val=val,
+            holdout=data.split_description(holdout),
+            noise=noise,
+            theta_declared=theta_decl,
+            theta_before=theta_before,
+            theta_selected=theta_sel,
+            theta_after=theta,
+            std_after=std,
+            nominal=nominal_names,
+            active=active,
+            effects=effects,
+            candidates=candidates,
+            rounds=rounds,
+            steps=steps,
+            structure=structure,
+            rmse=rmse_d,
+            unexplained_structure=unexplained,
+            robust=robust,
+            correlations=corr,
+            at_bound=pb.at_bounds(theta, active),
+            features=feats,
+            baselines=bl,
+            seconds=time.perf_counter() - t0,
+            registration=reg,
+        )
 
 
 def _share_needed(min_excess: float, err: float, floor: float) -> float:
@@ -703,8 +861,14 @@ def _register(pb: Problem, data: Dataset, rows, nominal, library) -> GlobalRegis
     reach = None
     if data.frame == "base":
         if reg_block is None:  # no registration to reach the frame: the data are taken as declared
-            return GlobalRegistration(R=np.eye(3), t=np.zeros(3), rmse_mm=float("nan"), explained=float("nan"),
-                                      applied=False, reason="declared base frame")
+            return GlobalRegistration(
+                R=np.eye(3),
+                t=np.zeros(3),
+                rmse_mm=float("nan"),
+                explained=float("nan"),
+                applied=False,
+                reason="declared base frame",
+            )
         hi = reg_block.bounds(pb.model, pb._phys_np)[1]
         reach = (float(hi[0]), float(hi[3]))
 
@@ -771,8 +935,11 @@ def measurement_frame(pb: Problem, theta, active, reg: GlobalRegistration | None
         R, t = reg.R @ R, reg.R @ t + reg.t
     # (rounded far below any tracker's resolution: the same model evaluated over other samples, e.g.
     # with a validation file, differs in the last bits)
-    return {"rotation_deg": np.round(np.degrees(rotation_vector(R)), 9).tolist(),
-            "translation_mm": np.round(t, 9).tolist(), "axis": np.round(R[:, 2], 12).tolist()}
+    return {
+        "rotation_deg": np.round(np.degrees(rotation_vector(R)), 9).tolist(),
+        "translation_mm": np.round(t, 9).tolist(),
+        "axis": np.round(R[:, 2], 12).tolist(),
+    }
 
 
 def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
@@ -783,8 +950,13 @@ def predict_report(report: dict, robot, data: Dataset) -> np.ndarray:
     robot = Robot(robot) if isinstance(robot, Design) else robot
     m = report["model"]
     clock = m.get("clock")
-    pb = Problem(RobotModel.of(robot), robot, data, tuple(BY_NAME[n] for n in m["blocks"]),
-                 clock=None if clock is None else tuple(clock))
+    pb = Problem(
+        RobotModel.of(robot),
+        robot,
+        data,
+        tuple(BY_NAME[n] for n in m["blocks"]),
+        clock=None if clock is None else tuple(clock),
+    )
     p = pb.predict(np.asarray(m["theta"], float), m["active"])
     reg = GlobalRegistration.from_json(report.get("global_registration"))
     return p if reg is None else reg.to_measured(p)

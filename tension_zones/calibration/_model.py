@@ -123,8 +123,9 @@ class RobotModel:
 
     def physical(self, robot: Robot) -> dict:
         if robot.n_wires_per_segment != self.structure.n_wires_per_segment:
-            raise ValueError(f"the robot has wire counts {robot.n_wires_per_segment}, the model "
-                             f"{self.structure.n_wires_per_segment}")
+            raise ValueError(
+                f"the robot has wire counts {robot.n_wires_per_segment}, the model {self.structure.n_wires_per_segment}"
+            )
         return _declared(robot)
 
     def inputs(self, data: Dataset, clock=None) -> dict:
@@ -133,8 +134,13 @@ class RobotModel:
             raise ValueError(f"the data have {data.n_wires} wire columns, the robot {self.structure.n_wires} wires")
         q = jnp.asarray(data.q)
         reset = jnp.asarray(data.reset, q.dtype)
-        return {"q": q, "f": jnp.asarray(data.f), "direction": motion_direction(q, reset), "reset": reset,
-                "hours": jnp.asarray(elapsed_hours(data, clock), q.dtype)}
+        return {
+            "q": q,
+            "f": jnp.asarray(data.f),
+            "direction": motion_direction(q, reset),
+            "reset": reset,
+            "hours": jnp.asarray(elapsed_hours(data, clock), q.dtype),
+        }
 
     @staticmethod
     def loaded(phys, inputs):
@@ -158,13 +164,16 @@ class RobotModel:
         loaded = self.loaded(phys, inputs)  # one flag for all samples (outside the vmap)
         s0 = self.start(inputs["q"].shape[0], inputs["q"].dtype) if state is None else state
         B, s1 = jax.vmap(lambda q, f, d, s: solve_warm(phys, st, q, f, d, s, loaded=loaded))(
-            inputs["q"], inputs["f"], inputs["direction"], s0)
+            inputs["q"], inputs["f"], inputs["direction"], s0
+        )
         if self.memory:
             K = jax.vmap(lambda q, f, d, b: elastic_stiffness(phys, st, q, f, d, b, loaded))(
-                inputs["q"], inputs["f"], inputs["direction"], B)
+                inputs["q"], inputs["f"], inputs["direction"], B
+            )
             h = jnp.repeat(phys["bending_friction"], st.pieces)
             B = bending_memory(B.reshape(B.shape[0], -1), K, h, inputs["reset"]).reshape(B.shape)
         lengths = jax.vmap(lambda q, f, d, b: compressed_lengths(phys, st, q, f, d, b))(
-            inputs["q"], inputs["f"], inputs["direction"], B)
+            inputs["q"], inputs["f"], inputs["direction"], B
+        )
         p, R = jax.vmap(chain_tip)(lengths, B)
         return {"p": p, "R": R} if state is None else {"p": p, "R": R, "state": s1}

@@ -43,7 +43,7 @@ class Spec:
 
 
 def _split(spec: Spec, theta):
-    return [theta[o:o + s] for o, s in zip(spec.offsets, spec.sizes)]
+    return [theta[o : o + s] for o, s in zip(spec.offsets, spec.sizes)]
 
 
 def _named(spec: Spec, on):
@@ -107,8 +107,21 @@ def _engine(spec, theta0, free, on, rows, w, c, lo, hi, phys0, inputs, y, max_it
 
     n_state = y.shape[0] if _has_path(spec.model) else rows.shape[0]  # a path model solves all
     state = spec.model.start(n_state, y.dtype) if warm else ()
-    return levenberg_marquardt(fun, theta0, free, w, c, lo, hi, max_iter, tol=FIT_TOL, rows=(rows.shape[0], y.shape[1]),
-                               cols=cols, n_cols=n_cols, state=state)
+    return levenberg_marquardt(
+        fun,
+        theta0,
+        free,
+        w,
+        c,
+        lo,
+        hi,
+        max_iter,
+        tol=FIT_TOL,
+        rows=(rows.shape[0], y.shape[1]),
+        cols=cols,
+        n_cols=n_cols,
+        state=state,
+    )
 
 
 #: The engine's programs in this process, by model (``Spec``) and the arguments' shapes: a callable, or
@@ -241,8 +254,11 @@ def _pad(data):
     def rep(a):
         return np.concatenate([a, np.repeat(a[-1:], extra, axis=0)])
 
-    changes = {f.name: rep(np.asarray(getattr(data, f.name))) for f in dataclasses.fields(data)
-               if isinstance(getattr(data, f.name), np.ndarray) and getattr(data, f.name).shape[:1] == (n,)}
+    changes = {
+        f.name: rep(np.asarray(getattr(data, f.name)))
+        for f in dataclasses.fields(data)
+        if isinstance(getattr(data, f.name), np.ndarray) and getattr(data, f.name).shape[:1] == (n,)
+    }
     if data.groups is not None:
         changes["groups"] = tuple(data.groups) + (data.groups[-1],) * extra
     return dataclasses.replace(data, **changes)
@@ -279,8 +295,9 @@ class Problem:
         pieces = max((b.pieces_for(self.model) for b in self.spec.blocks if b.name in active), default=1)
         own = getattr(getattr(self.model, "structure", None), "pieces", 1)
         pieces = pieces if pieces > own and hasattr(self.model, "with_pieces") else 1
-        memory = (any(getattr(b, "memory", False) for b in self.spec.blocks if b.name in active)
-                  and hasattr(self.model, "with_memory"))
+        memory = any(getattr(b, "memory", False) for b in self.spec.blocks if b.name in active) and hasattr(
+            self.model, "with_memory"
+        )
         if (pieces, memory) not in self._specs:
             model = self.model.with_pieces(pieces) if pieces > 1 else self.model
             model = model.with_memory() if memory else model
@@ -318,10 +335,23 @@ class Problem:
         # NumPy arrays straight into the program (a jnp.asarray of each compiled a small program of
         # its own at its first use in a process)
         f, i = np.float64, np.int64
-        return (self.spec_for(active), np.asarray(theta0, f), np.asarray(free, f), np.asarray(self.on(active), f),
-                np.asarray(rows, i), np.asarray(w, f), np.asarray(huber_c, f), np.asarray(self.lo, f),
-                np.asarray(self.hi, f), self.phys0, self.inputs, self.y, np.asarray(max_iter, i),
-                np.asarray(cols, i), np.asarray(n_cols, i))
+        return (
+            self.spec_for(active),
+            np.asarray(theta0, f),
+            np.asarray(free, f),
+            np.asarray(self.on(active), f),
+            np.asarray(rows, i),
+            np.asarray(w, f),
+            np.asarray(huber_c, f),
+            np.asarray(self.lo, f),
+            np.asarray(self.hi, f),
+            self.phys0,
+            self.inputs,
+            self.y,
+            np.asarray(max_iter, i),
+            np.asarray(cols, i),
+            np.asarray(n_cols, i),
+        )
 
     def _call(self, *args):
         return tuple(np.asarray(x) for x in engine(*self._args(*args)))
@@ -369,10 +399,10 @@ class Problem:
         J = np.empty((rows.size, d, P)) if jacobian else None
         for i, rw in enumerate(rows):
             out = self._call(theta, active, np.zeros(P), rw, np.zeros(k), np.inf, 0, np.arange(P), P if jacobian else 0)
-            r[i * k:(i + 1) * k] = out[3]
+            r[i * k : (i + 1) * k] = out[3]
             if jacobian:
-                J[i * k:(i + 1) * k] = out[4]
-        return r[:len(want)], (J[:len(want)] if jacobian else None)
+                J[i * k : (i + 1) * k] = out[4]
+        return r[: len(want)], (J[: len(want)] if jacobian else None)
 
     def _path(self, active) -> bool:
         """Whether the model made of ``active`` predicts a sample from the samples before it (a memory:
@@ -446,10 +476,14 @@ class Problem:
             if b.name in names:
                 th, sd = theta[sl[b.name]], np.asarray(std)[sl[b.name]]
                 h = 1e-6 * np.maximum(np.abs(th), 1.0)
-                slope = (np.ravel(b.report_values(th + h, self.model, self._phys_np))
-                         - np.ravel(b.report_values(th - h, self.model, self._phys_np))) / (2 * h)
-                out[b.name] = {k: (float(v) if np.isfinite(v) else None)
-                               for k, v in zip(b.labels(self.model, self._phys_np), np.abs(slope) * sd)}
+                slope = (
+                    np.ravel(b.report_values(th + h, self.model, self._phys_np))
+                    - np.ravel(b.report_values(th - h, self.model, self._phys_np))
+                ) / (2 * h)
+                out[b.name] = {
+                    k: (float(v) if np.isfinite(v) else None)
+                    for k, v in zip(b.labels(self.model, self._phys_np), np.abs(slope) * sd)
+                }
         return out
 
     def at_bounds(self, theta, names, tol: float = 0.01) -> list[str]:

@@ -106,19 +106,31 @@ class GlobalRegistration:
         return np.asarray(p) @ self.R.T + self.t if self.applied else np.asarray(p)
 
     def to_json(self) -> dict:
-        return {"applied": self.applied, "reason": self.reason, "matrix": np.asarray(self.R).tolist(),
-                "rotation_deg": np.degrees(rotation_vector(self.R)).tolist(),
-                "angle_deg": float(np.degrees(np.linalg.norm(rotation_vector(self.R)))),
-                "translation_mm": np.asarray(self.t).tolist(), "rmse_mm": self.rmse_mm,
-                "explained": self.explained, "trusted": self.trusted}
+        return {
+            "applied": self.applied,
+            "reason": self.reason,
+            "matrix": np.asarray(self.R).tolist(),
+            "rotation_deg": np.degrees(rotation_vector(self.R)).tolist(),
+            "angle_deg": float(np.degrees(np.linalg.norm(rotation_vector(self.R)))),
+            "translation_mm": np.asarray(self.t).tolist(),
+            "rmse_mm": self.rmse_mm,
+            "explained": self.explained,
+            "trusted": self.trusted,
+        }
 
     @staticmethod
     def from_json(d: dict | None) -> GlobalRegistration | None:
         if not d or not d.get("applied"):
             return None
         R = np.asarray(d["matrix"], float)
-        return GlobalRegistration(R=R, t=np.asarray(d["translation_mm"], float), rmse_mm=d["rmse_mm"],
-                                  explained=d["explained"], applied=True, reason=d["reason"])
+        return GlobalRegistration(
+            R=R,
+            t=np.asarray(d["translation_mm"], float),
+            rmse_mm=d["rmse_mm"],
+            explained=d["explained"],
+            applied=True,
+            reason=d["reason"],
+        )
 
 
 def global_registration(predict, data: Dataset, rows, reach=None) -> GlobalRegistration:
@@ -155,12 +167,18 @@ def global_registration(predict, data: Dataset, rows, reach=None) -> GlobalRegis
     else:
         beyond = bool(np.any(np.abs(w) > reach[0]) or np.any(np.abs(t) > reach[1]))
         applied = beyond and explained >= MIN_EXPLAINED
-        reason = ("declared base frame, but the best frame is beyond the registration effect's reach "
-                  f"({np.degrees(np.linalg.norm(w)):.1f} deg, {np.linalg.norm(t):.1f} mm)" if applied
-                  else "declared base frame, within the registration effect's reach" if not beyond
-                  else "declared base frame; a far frame fits better, but the nominal model explains too "
-                       "little of the motion to trust it")
+        reason = (
+            "declared base frame, but the best frame is beyond the registration effect's reach "
+            f"({np.degrees(np.linalg.norm(w)):.1f} deg, {np.linalg.norm(t):.1f} mm)"
+            if applied
+            else "declared base frame, within the registration effect's reach"
+            if not beyond
+            else "declared base frame; a far frame fits better, but the nominal model explains too "
+            "little of the motion to trust it"
+        )
     if not explained >= MIN_EXPLAINED:
-        reason += (f"; the nominal model explains {100 * explained:.0f} % of the tip motion in the best frame "
-                   f"(tip error {rms:.2f} mm): check the design file and the data's units")
+        reason += (
+            f"; the nominal model explains {100 * explained:.0f} % of the tip motion in the best frame "
+            f"(tip error {rms:.2f} mm): check the design file and the data's units"
+        )
     return GlobalRegistration(R=R, t=t, rmse_mm=rms, explained=explained, applied=applied, reason=reason)

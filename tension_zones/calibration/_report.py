@@ -50,13 +50,17 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
     pb, feats = res.problem, res.features
     mask = res.train | res.held
     # the fits on the training part: the held-out samples' residuals are out of sample
-    comps = {"before (nominal fit)": _components(pb.residuals(res.theta_before, res.nominal), feats),
-             "after": _components(pb.residuals(res.theta_selected, res.active), feats)}
+    comps = {
+        "before (nominal fit)": _components(pb.residuals(res.theta_before, res.nominal), feats),
+        "after": _components(pb.residuals(res.theta_selected, res.active), feats),
+    }
     # the effects added go on a line of their own: in the panels' titles a long list runs into its neighbours
     added = textwrap.fill("after: " + (", ".join(e["name"] for e in res.effects) or "no effect added"), 150)
     lim = 1.1 * max(np.percentile(np.abs(c[mask]), 99.5) for c in comps.values())
-    xlabels = {"bending_direction": "bending direction (deg, base frame)",
-               "motion": "motion rel. to bending dir. (deg; 0 = bending further)"}
+    xlabels = {
+        "bending_direction": "bending direction (deg, base frame)",
+        "motion": "motion rel. to bending dir. (deg; 0 = bending further)",
+    }
     paths = []
     for feat, fname in PLOTS.items():
         x = np.degrees(feats[feat])
@@ -76,8 +80,10 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
                 if row == 1:
                     ax.set_xlabel(xlabels[feat], fontsize=8)
         axes[0, 0].legend(fontsize=7, loc="upper right")
-        fig.suptitle(f"{Path(pb.data.source).name}: measured - predicted tip position "
-                     f"(dashed: +-2 noise sigma)\n{added}", fontsize=10)
+        fig.suptitle(
+            f"{Path(pb.data.source).name}: measured - predicted tip position (dashed: +-2 noise sigma)\n{added}",
+            fontsize=10,
+        )
         path = out_dir / fname
         _save(fig, path)
         plt.close(fig)
@@ -107,8 +113,15 @@ def plot_paths(res: Result, out_dir: Path) -> Path:
     ax.plot(p[:, 0], p[:, 1], ".-", color="C3", lw=0.6, ms=2.5, label=f"model ({err:.2f} mm RMSE)")
     if best:
         bp = np.asarray(best[1]["predicted"])
-        ax.plot(bp[:, 0], bp[:, 1], "-", color="C0", lw=0.5, alpha=0.6,
-                label=f"{best[0]} baseline ({best[1]['rmse_validate_mm']:.2f} mm)")
+        ax.plot(
+            bp[:, 0],
+            bp[:, 1],
+            "-",
+            color="C0",
+            lw=0.5,
+            alpha=0.6,
+            label=f"{best[0]} baseline ({best[1]['rmse_validate_mm']:.2f} mm)",
+        )
     ax.set_aspect("equal")
     ax.set_xlabel("tip x (mm)")
     ax.set_ylabel("tip y (mm)")
@@ -136,7 +149,9 @@ def _save(fig, path: Path) -> None:
 
 def _fmt_params(params: dict, std: dict | None = None) -> str:
     std = std or {}
-    return ", ".join(f"{k} = {v:.4g}" + (f" +- {std[k]:.2g}" if std.get(k) is not None else "") for k, v in params.items())
+    return ", ".join(
+        f"{k} = {v:.4g}" + (f" +- {std[k]:.2g}" if std.get(k) is not None else "") for k, v in params.items()
+    )
 
 
 def _f(x, nd=4):
@@ -146,33 +161,51 @@ def _f(x, nd=4):
 def markdown(report: dict) -> str:
     """``report.md``: the summary, before and after, what was found, the evidence round by round, the
     structure left, the final parameters and the plots."""
-    lines = (_md_summary(report) + _md_before_after(report) + _md_found(report) + _md_evidence(report)
-             + _md_structure(report) + _md_parameters(report))
+    lines = (
+        _md_summary(report)
+        + _md_before_after(report)
+        + _md_found(report)
+        + _md_evidence(report)
+        + _md_structure(report)
+        + _md_parameters(report)
+    )
     return "\n".join(lines) + "\n"
 
 
 def _md_summary(report: dict) -> list[str]:
     val = "rmse_validate_mm" in report
     lines = [f"# Calibration report: `{Path(report['data']).name}`", ""]
-    lines += [f"{report['n_samples']} samples ({report['dropped_rows']} bad rows dropped); training: "
-              f"{report['n_train']}, held out: {report['n_held_out']} ({report['holdout']}). "
-              + (f"Validation: `{Path(report['validate']).name}`, {report['n_validate']} samples, only predicted "
-                 "after the selection. " if val and report.get("validate") else "")
-              + f"Held-out errors are those of the models fitted on the training part; the chosen model is then "
-              f"refitted on all {report['n_samples']} samples (RMSE {_f(report.get('rmse_refit_mm'))} mm on them), and "
-              f"its parameters{' and validation errors' if val else ''} are that fit's. "
-              + f"Loss: {'Huber (robust)' if report['robust'] else 'least squares'}. "
-              f"Nominal parameters always fitted: {', '.join(report['nominal_parameters'])}.", ""]
+    lines += [
+        f"{report['n_samples']} samples ({report['dropped_rows']} bad rows dropped); training: "
+        f"{report['n_train']}, held out: {report['n_held_out']} ({report['holdout']}). "
+        + (
+            f"Validation: `{Path(report['validate']).name}`, {report['n_validate']} samples, only predicted "
+            "after the selection. "
+            if val and report.get("validate")
+            else ""
+        )
+        + f"Held-out errors are those of the models fitted on the training part; the chosen model is then "
+        f"refitted on all {report['n_samples']} samples (RMSE {_f(report.get('rmse_refit_mm'))} mm on them), and "
+        f"its parameters{' and validation errors' if val else ''} are that fit's. "
+        + f"Loss: {'Huber (robust)' if report['robust'] else 'least squares'}. "
+        f"Nominal parameters always fitted: {', '.join(report['nominal_parameters'])}.",
+        "",
+    ]
     if report.get("warnings"):
         lines += ["## Read first", ""] + [f"- {w}" for w in report["warnings"]] + [""]
     reg = report.get("global_registration")
     if reg and reg.get("applied"):
-        lines += [(f"The recording was moved into the robot's base frame before the loop ({reg['reason']}): "
-                   f"rotation {reg['angle_deg']:.2f} deg (vector {np.round(reg['rotation_deg'], 3).tolist()} deg), "
-                   f"translation {np.round(reg['translation_mm'], 3).tolist()} mm; the nominal model's tip error "
-                   f"there {reg['rmse_mm']:.3f} mm, {reg['explained']:.1%} of the tip motion's variance explained. "
-                   "Positions and frame parameters below are in that frame; `measurement_frame` in report.json "
-                   "is the whole transform."), ""]
+        lines += [
+            (
+                f"The recording was moved into the robot's base frame before the loop ({reg['reason']}): "
+                f"rotation {reg['angle_deg']:.2f} deg (vector {np.round(reg['rotation_deg'], 3).tolist()} deg), "
+                f"translation {np.round(reg['translation_mm'], 3).tolist()} mm; the nominal model's tip error "
+                f"there {reg['rmse_mm']:.3f} mm, {reg['explained']:.1%} of the tip motion's variance explained. "
+                "Positions and frame parameters below are in that frame; `measurement_frame` in report.json "
+                "is the whole transform."
+            ),
+            "",
+        ]
     return lines
 
 
@@ -180,30 +213,47 @@ def _md_before_after(report: dict) -> list[str]:
     nf = report["noise_floor_mm"]
     val = "rmse_validate_mm" in report
     lines: list[str] = []
-    lines += ["## Before and after (tip-position RMSE, mm)", "",
-              "| model | held out | / noise floor |" + (" validation | validation, mean offset removed |" if val else ""),
-              "| --- | ---: | ---: |" + (" ---: | ---: |" if val else ""),
-              f"| declared design, nothing fitted | {_f(report['rmse_declared_mm'])} | "
-              f"{report['rmse_declared_mm'] / nf:.2f} |" + (" | |" if val else "")]
+    lines += [
+        "## Before and after (tip-position RMSE, mm)",
+        "",
+        "| model | held out | / noise floor |" + (" validation | validation, mean offset removed |" if val else ""),
+        "| --- | ---: | ---: |" + (" ---: | ---: |" if val else ""),
+        f"| declared design, nothing fitted | {_f(report['rmse_declared_mm'])} | "
+        f"{report['rmse_declared_mm'] / nf:.2f} |" + (" | |" if val else ""),
+    ]
     for i, s in enumerate(report["steps"]):
         name = "nominal parameters fitted" if i == 0 else "+ " + " + ".join(s["effects"])
-        lines.append(f"| {name} | {_f(s['rmse_held_out_mm'])} | {s['rmse_held_out_mm'] / nf:.2f} |"
-                     + (f" {_f(s['rmse_validate_mm'])} | {_f(s['rmse_validate_aligned_mm'])} |" if val else ""))
-    lines += [f"| noise floor ({report['noise']['method']}, {report['noise']['pairs']} pairs) | {nf:.4f} | 1 |"
-              + (" | |" if val else ""), ""]
+        lines.append(
+            f"| {name} | {_f(s['rmse_held_out_mm'])} | {s['rmse_held_out_mm'] / nf:.2f} |"
+            + (f" {_f(s['rmse_validate_mm'])} | {_f(s['rmse_validate_aligned_mm'])} |" if val else "")
+        )
+    lines += [
+        f"| noise floor ({report['noise']['method']}, {report['noise']['pairs']} pairs) | {nf:.4f} | 1 |"
+        + (" | |" if val else ""),
+        "",
+    ]
     fam = report["steps"][-1].get("rmse_by_family_mm") if report["steps"] else None
     if fam:
-        lines += ["By pattern family (the final model; tip-position RMSE, mm):", "", "| part | family | RMSE |",
-                  "| --- | --- | ---: |"]
+        lines += [
+            "By pattern family (the final model; tip-position RMSE, mm):",
+            "",
+            "| part | family | RMSE |",
+            "| --- | --- | ---: |",
+        ]
         lines += [f"| {part} | {f} | {_f(v)} |" for part, rows in fam.items() for f, v in rows.items()]
         lines.append("")
     if val and report.get("baselines"):
-        lines += [("Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the "
-                  "training data):"), "", "| baseline | choice | held out | validation | validation aligned |",
-                  "| --- | --- | ---: | ---: | ---: |"]
+        lines += [
+            ("Black-box baselines (hyper-parameters chosen on the held-out part, refitted on all the training data):"),
+            "",
+            "| baseline | choice | held out | validation | validation aligned |",
+            "| --- | --- | ---: | ---: | ---: |",
+        ]
         for k, b in report["baselines"].items():
-            lines.append(f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
-                         f"{_f(b['rmse_validate_aligned_mm'])} |")
+            lines.append(
+                f"| {k} | {b['choice']} | {_f(b['rmse_held_out_mm'])} | {_f(b['rmse_validate_mm'])} | "
+                f"{_f(b['rmse_validate_aligned_mm'])} |"
+            )
         lines.append("")
     return lines
 
@@ -216,24 +266,44 @@ def _md_found(report: dict) -> list[str]:
             lines.append(f"- **{e['name']}**: {_fmt_params(e['params'], e.get('params_std'))}")
     else:
         lines.append("- No effect of the library improved the held-out error significantly: none added.")
-    lines += [(f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}** "
-              f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor)."), ""]
+    lines += [
+        (
+            f"- Unexplained structure left: **{'yes' if report['unexplained_structure'] else 'no'}** "
+            f"(z > {STRUCTURE_Z:g} against an input, or RMSE > {EXCESS_RATIO} x noise floor)."
+        ),
+        "",
+    ]
     if report["parameters"].get("at_bound"):
-        lines += [(f"Parameters at a bound (their deviations are not meaningful): "
-                  f"{', '.join(report['parameters']['at_bound'])}."), ""]
+        lines += [
+            (
+                f"Parameters at a bound (their deviations are not meaningful): "
+                f"{', '.join(report['parameters']['at_bound'])}."
+            ),
+            "",
+        ]
     c = report["correlations"]
     if c["pairs"]:
-        lines += ["Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
-                  + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"]) + ".", ""]
+        lines += [
+            "Largest parameter correlations (Gauss-Newton; near 1 = a pair trades off freely): "
+            + ", ".join(f"{p['a']} / {p['b']} {p['corr']:+.2f}" for p in c["pairs"])
+            + ".",
+            "",
+        ]
     return lines
 
 
 def _md_evidence(report: dict) -> list[str]:
     lines: list[str] = []
-    lines += ["## Evidence", "",
-              ("Score test on the held-out residual (z-value of the chi-square statistic of the residual "
-              "projected on the effect's parameter sensitivities; higher = explains more), then the "
-              "refit on the training part and the held-out check:"), ""]
+    lines += [
+        "## Evidence",
+        "",
+        (
+            "Score test on the held-out residual (z-value of the chi-square statistic of the residual "
+            "projected on the effect's parameter sensitivities; higher = explains more), then the "
+            "refit on the training part and the held-out check:"
+        ),
+        "",
+    ]
     for rd in report["rounds"]:
         lines += _md_round(report, rd)
     return lines
@@ -244,51 +314,74 @@ def _md_round(report: dict, rd: dict) -> list[str]:
     backward step."""
     lines: list[str] = []
     sc = [c for c in report["candidates"] if c["round"] == rd["round"]]
-    lines.append(f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
-                 + ", ".join(f"{c['name']} {c['score']:.1f}" if "not_scored" not in c
-                             else f"{c['name']} not scored ({c['not_scored']})" for c in sc) + ".")
+    lines.append(
+        f"**Round {rd['round']}** (significant above z = {rd['z_critical']:.2f}): "
+        + ", ".join(
+            f"{c['name']} {c['score']:.1f}" if "not_scored" not in c else f"{c['name']} not scored ({c['not_scored']})"
+            for c in sc
+        )
+        + "."
+    )
     lines.append("")
     screened = [c for c in sc if "screened_rmse_mm" in c]
     if any(c.get("second_look") for c in sc):
-        lines.append("- no score significant, the held-out residual above the noise floor and not noise: a second "
-                     "look, short refits of the best-scoring candidates (a score is first order); one is "
-                     f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess")
+        lines.append(
+            "- no score significant, the held-out residual above the noise floor and not noise: a second "
+            "look, short refits of the best-scoring candidates (a score is first order); one is "
+            f"kept only if it explains at least {SECOND_LOOK_SHARE:.0%} of the excess"
+        )
     if screened:
-        lines.append(f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
-                     f"{rd['rmse_held_out_mm']:.4f} mm): "
-                     + ", ".join(f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
-                                 + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
-                                 for c in screened))
+        lines.append(
+            f"- short refits ({SCREEN_ITERATIONS} iterations; held-out RMSE before the round "
+            f"{rd['rmse_held_out_mm']:.4f} mm): "
+            + ", ".join(
+                f"{c['name']} {c['screened_rmse_mm']:.4f} mm"
+                + (" (too small a drop: no full refit)" if c.get("screened_out") else "")
+                for c in screened
+            )
+        )
     la, jl = rd.get("look_ahead"), rd.get("joint_look")
     for t in rd["tried"]:
-        verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"]
-                                                else "not significant")
+        verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"] else "not significant")
         if t.get("short_of_share"):
-            verdict = (f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
-                       f"short of the {t['share_needed']:.1%} one effect needs"
-                       + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else ""))
+            verdict = (
+                f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
+                f"short of the {t['share_needed']:.1%} one effect needs"
+                + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else "")
+            )
         elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
             verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
         if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
             verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
-        lines.append(f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
-                     f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
-                     f"{t['needed']:.1f})"
-                     + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
-                     + (f", of the later samples' {t['sse_drop_later']:.1f} (fitted on the earlier ones)"
-                        if "sse_drop_later" in t else "")
-                     + f" -> {verdict}")
+        lines.append(
+            f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
+            f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
+            f"{t['needed']:.1f})"
+            + (f", of the training part's {t['sse_drop_train']:.1f}" if "sse_drop_train" in t else "")
+            + (
+                f", of the later samples' {t['sse_drop_later']:.1f} (fitted on the earlier ones)"
+                if "sse_drop_later" in t
+                else ""
+            )
+            + f" -> {verdict}"
+        )
     if la:
         a, b = la["branches"]
-        line = (f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
-                f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} first it ends "
-                f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; ")
+        line = (
+            f"- a near tie: the test could not tell {a['first']} from {b['first']}, and the loop ended with "
+            f"structure left, so it went on from {b['first']} too (look-ahead): with {a['first']} first it ends "
+            f"with {', '.join(a['effects']) or 'nothing'} at {a['rmse_held_out_mm']:.4f} mm held out; "
+        )
         if "behind_after_round" in b:
-            line += (f"with {b['first']} first it was behind after round {b['behind_after_round']} "
-                     f"({b['rmse_held_out_mm']:.4f} mm) and was given up")
+            line += (
+                f"with {b['first']} first it was behind after round {b['behind_after_round']} "
+                f"({b['rmse_held_out_mm']:.4f} mm) and was given up"
+            )
         else:
-            line += (f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
-                     f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})")
+            line += (
+                f"with {b['first']} first, with {', '.join(b['effects'])} at {b['rmse_held_out_mm']:.4f} mm "
+                f"(drop {la['sse_drop']:.1f}, needed {la['needed']:.1f})"
+            )
         lines.append(line + f" -> the branch of **{la['kept']}** is kept")
     if jl:
         lines.append(
@@ -298,40 +391,66 @@ def _md_round(report: dict, rd: dict) -> list[str]:
             + (f" and removes {', '.join(jl['removed'])}" if jl["removed"] else "")
             + f": held-out RMSE {jl['rmse_held_out_mm']:.4f} mm, {jl['share_held_out']:.1%} of the excess "
             f"(needed {jl['share_needed']:.0%}), drop {jl['sse_drop']:.1f} (needed {jl['needed']:.1f}) -> "
-            + ("**kept**" if jl["kept"] else "not kept"))
+            + ("**kept**" if jl["kept"] else "not kept")
+        )
     for t in rd.get("removed", []):
-        lines.append(f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
-                     f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
-                     "effect and is removed")
+        lines.append(
+            f"- backward step: without {t['name']} the held-out RMSE is {t['rmse_held_out_mm']:.4f} mm "
+            f"(rise {t['sse_rise']:.1f}, needed {t['needed']:.1f}): it only stood in for the new "
+            "effect and is removed"
+        )
     if not rd["tried"]:
-        lines.append("- no short refit lowered the held-out error: the loop stops." if screened
-                     else "- no candidate significant: the loop stops.")
+        lines.append(
+            "- no short refit lowered the held-out error: the loop stops."
+            if screened
+            else "- no candidate significant: the loop stops."
+        )
     lines.append("")
     return lines
 
 
 def _md_structure(report: dict) -> list[str]:
     lines: list[str] = []
-    lines += [("Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
-              f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):"), "",
-              "| input | variance explained | z |", "| --- | ---: | ---: |"]
+    lines += [
+        (
+            "Structure left in the final held-out residual (k-NN smoother on one input at a time vs. "
+            f"shuffled residuals; structure when z > {STRUCTURE_Z:g}):"
+        ),
+        "",
+        "| input | variance explained | z |",
+        "| --- | ---: | ---: |",
+    ]
     for k, v in report["structure"].items():
         if "explained" in v:
             lines.append(f"| {k} | {v['explained']:.3f} | {v['z']:.1f} |")
     m = report["structure"]["mean"]
     ex = report["structure"]["excess_over_noise"]
-    lines += [f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
-              f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |", ""]
+    lines += [
+        f"| mean offset {np.round(m['offset_mm'], 4).tolist()} mm | | {m['z']:.1f} |",
+        f"| RMSE / noise floor = {ex['ratio_to_floor']:.3f} | | {ex['z']:.1f} |",
+        "",
+    ]
     return lines
 
 
 def _md_parameters(report: dict) -> list[str]:
     lines: list[str] = []
-    lines += ["## Final parameters", "",
-              ("`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
-              "in report units (the refit on every sample); `std`: linearised standard deviations from that fit (optimistic: "
-              "consecutive samples are correlated)."), "", "```", json.dumps(report["parameters"], indent=1), "```",
-              "", "## Plots", ""]
+    lines += [
+        "## Final parameters",
+        "",
+        (
+            "`physical`: the model's parameters after every fitted effect; `fitted`: each fitted block "
+            "in report units (the refit on every sample); `std`: linearised standard deviations from that fit (optimistic: "
+            "consecutive samples are correlated)."
+        ),
+        "",
+        "```",
+        json.dumps(report["parameters"], indent=1),
+        "```",
+        "",
+        "## Plots",
+        "",
+    ]
     for f in report["plots"]:
         lines.append(f"![{f}]({f})")
     return lines

@@ -54,14 +54,18 @@ def _stats(loaded: bool) -> tuple[tuple[str, str, str], ...]:
     out = []
     for measure, worst in (("dp_max", "max"), ("dw_max", "max"), ("kci_v", "min"), ("kci_w", "min")):
         for mode in ("full", "reduced"):
-            out += [(f"{measure}_{mode}_worst", f"{measure}_{mode}", worst),
-                    (f"{measure}_{mode}_mean", f"{measure}_{mode}", "mean")]
+            out += [
+                (f"{measure}_{mode}_worst", f"{measure}_{mode}", worst),
+                (f"{measure}_{mode}_mean", f"{measure}_{mode}", "mean"),
+            ]
     out.append(("controllable_fraction", "controllable", "mean"))
     if loaded:
         for measure in ("deflection_mm", "deflection_deg"):
             for mode in ("full", "reduced"):
-                out += [(f"{measure}_{mode}_worst", f"{measure}_{mode}", "nanmax"),
-                        (f"{measure}_{mode}_mean", f"{measure}_{mode}", "nanmean")]
+                out += [
+                    (f"{measure}_{mode}_worst", f"{measure}_{mode}", "nanmax"),
+                    (f"{measure}_{mode}_mean", f"{measure}_{mode}", "nanmean"),
+                ]
         out.append(("statics_feasible_fraction", "feasible", "mean"))
     return tuple(out)
 
@@ -69,8 +73,15 @@ def _stats(loaded: bool) -> tuple[tuple[str, str, str], ...]:
 #: Every statistic's column name (those after ``controllable_fraction`` only with a load).
 STATS = tuple(s[0] for s in _stats(True))
 #: Units of the statistics (by prefix).
-UNITS = {"dp_max": "mm", "dw_max": "rad", "kci": "1", "deflection_mm": "mm", "deflection_deg": "deg",
-         "controllable": "1", "statics": "1"}
+UNITS = {
+    "dp_max": "mm",
+    "dw_max": "rad",
+    "kci": "1",
+    "deflection_mm": "mm",
+    "deflection_deg": "deg",
+    "controllable": "1",
+    "statics": "1",
+}
 
 
 def sense(column: str) -> str:
@@ -117,9 +128,20 @@ def explore_designs(
     """
     args = (np.float64(dq),) if load is None else (np.float64(dq), np.asarray(as_wrench(load)))
     fn = _kinematic_pose if load is None else _loaded_pose
-    return sweep_designs(fn, designs, theta_L, delta, *args, stats=_stats(load is not None),
-                         designs_per_chunk=designs_per_chunk, poses_per_chunk=poses_per_chunk,
-                         quiet=quiet, desc=desc, done=done, on_chunk=on_chunk)
+    return sweep_designs(
+        fn,
+        designs,
+        theta_L,
+        delta,
+        *args,
+        stats=_stats(load is not None),
+        designs_per_chunk=designs_per_chunk,
+        poses_per_chunk=poses_per_chunk,
+        quiet=quiet,
+        desc=desc,
+        done=done,
+        on_chunk=on_chunk,
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -136,8 +158,9 @@ POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
 def chunk_memory(space: Space, n: int) -> int:
     """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``)."""
     devices = len(jax.local_devices())
-    return (devices * space.poses_per_chunk * (POSE_BYTES + POSE_BYTES_N2 * n * n)
-            + space.designs_per_chunk * DESIGN_BYTES)
+    return (
+        devices * space.poses_per_chunk * (POSE_BYTES + POSE_BYTES_N2 * n * n) + space.designs_per_chunk * DESIGN_BYTES
+    )
 
 
 def plan(space: Space) -> str:
@@ -146,14 +169,18 @@ def plan(space: Space) -> str:
     from .._resources import check_memory, gb
 
     n = max(space.n_wires)
-    check_memory(chunk_memory(space, n), f"a chunk of {space.designs_per_chunk:,} designs x "
-                 f"{space.poses_per_chunk:,} poses of {n} wires",
-                 "lower the space's \"chunks\" (\"poses\": the poses per step)")
+    check_memory(
+        chunk_memory(space, n),
+        f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} poses of {n} wires",
+        'lower the space\'s "chunks" ("poses": the poses per step)',
+    )
     designs = sum(space.count(k) for k in space.n_wires)
     poses = space.theta_L.size * space.delta.size
     chunks = sum(-(-space.count(k) // space.designs_per_chunk) for k in space.n_wires)
-    return (f"exploring {designs:,} designs x {poses:,} poses = {designs * poses:.3g} design-poses in "
-            f"{chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)")
+    return (
+        f"exploring {designs:,} designs x {poses:,} poses = {designs * poses:.3g} design-poses in "
+        f"{chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)"
+    )
 
 
 # --------------------------------------------------------------------------------------------
@@ -209,26 +236,32 @@ class _Store:
             if old != ident:
                 key = _first_difference(old["space"] or {}, ident["space"]) if old["format"] == FORMAT else None  # type: ignore[arg-type]
                 what = f"space key {key!r} differs" if key else "another format or statistics"
-                raise ValueError(f"{str(self.out)!r} holds another exploration ({what}); refusing to "
-                                 "mix them: choose a new output folder")
+                raise ValueError(
+                    f"{str(self.out)!r} holds another exploration ({what}); refusing to "
+                    "mix them: choose a new output folder"
+                )
             done = sum(len(v) for v in self.manifest["done"].values())
             if log:
-                log(f"resuming the exploration in {str(self.out)!r}: {done} of "
-                    f"{self.manifest['chunks_total']} chunks done")
+                log(
+                    f"resuming the exploration in {str(self.out)!r}: {done} of "
+                    f"{self.manifest['chunks_total']} chunks done"
+                )
         elif any(p.name != LOCK_NAME for p in self.out.iterdir()):
-            raise ValueError(f"the output folder {str(self.out)!r} is not empty and holds no "
-                             "exploration; refusing to overwrite it")
+            raise ValueError(
+                f"the output folder {str(self.out)!r} is not empty and holds no exploration; refusing to overwrite it"
+            )
         else:
-            self.manifest = {**ident, "done": {str(n): [] for n in space.n_wires},
-                             "chunks_total": sum(-(-space.count(n) // space.designs_per_chunk)
-                                                 for n in space.n_wires),
-                             "complete": False}
+            self.manifest = {
+                **ident,
+                "done": {str(n): [] for n in space.n_wires},
+                "chunks_total": sum(-(-space.count(n) // space.designs_per_chunk) for n in space.n_wires),
+                "complete": False,
+            }
             try:  # an unwritable folder fails here, before any computation
                 (self.out / "chunks").mkdir(parents=True, exist_ok=True)
                 self._save_manifest()
             except OSError as e:
-                raise ValueError(f"cannot write the output folder {str(self.out)!r}: "
-                                 f"{e.strerror or e}") from None
+                raise ValueError(f"cannot write the output folder {str(self.out)!r}: {e.strerror or e}") from None
 
     def _chunk_path(self, n: int, c: int) -> Path:
         return self.out / "chunks" / f"n{n}_{c:06d}.npy"
@@ -321,10 +354,19 @@ def _explore(space: Space, store: _Store | None, quiet: bool):
     for n in space.n_wires:
         done = store.done(n) if store is not None else None
         on_chunk = (lambda c, rows, n=n: store.save(n, c, rows)) if store is not None else None
-        stats = explore_designs(space.batch(n), space.theta_L, space.delta, space.dq, space.load,
-                                designs_per_chunk=space.designs_per_chunk,
-                                poses_per_chunk=space.poses_per_chunk, quiet=quiet,
-                                desc=f"{n} wires", done=done, on_chunk=on_chunk)
+        stats = explore_designs(
+            space.batch(n),
+            space.theta_L,
+            space.delta,
+            space.dq,
+            space.load,
+            designs_per_chunk=space.designs_per_chunk,
+            poses_per_chunk=space.poses_per_chunk,
+            quiet=quiet,
+            desc=f"{n} wires",
+            done=done,
+            on_chunk=on_chunk,
+        )
         if first:
             parts.append({**space.columns(n), **stats})  # type: ignore[dict-item]  # (the first process has them)
     if not first:
@@ -396,12 +438,12 @@ def _undominated(U):
     keep = np.zeros(len(U), bool)
     front = U[:0]
     for start in range(0, len(U), 128):
-        B = U[start:start + 128]
+        B = U[start : start + 128]
         beaten = np.zeros(len(B), bool)
         for other in (front, B):  # [i, j]: other j dominates point i
             le, lt = other[None] <= B[:, None], other[None] < B[:, None]
             beaten |= np.any(np.all(le, axis=2) & np.any(lt, axis=2), axis=1)
-        keep[start:start + len(B)] = ~beaten
+        keep[start : start + len(B)] = ~beaten
         front = np.concatenate([front, B[~beaten]])
     return keep
 
@@ -420,6 +462,7 @@ def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]
     on = pareto_front(table, columns)
     counts = sorted(set(table["n_wires"].tolist()))
     share = ", ".join(f"{n} wires: {int(np.sum(on & (table['n_wires'] == n)))}" for n in counts)
-    return (f"explored {table['n_wires'].size} designs ({', '.join(map(str, counts))} wires) in "
-            f"{seconds:.1f} s; Pareto front of {' vs '.join(columns)}: {int(on.sum())} designs ({share})")
-
+    return (
+        f"explored {table['n_wires'].size} designs ({', '.join(map(str, counts))} wires) in "
+        f"{seconds:.1f} s; Pareto front of {' vs '.join(columns)}: {int(on.sum())} designs ({share})"
+    )

@@ -72,9 +72,7 @@ class _Bounds:
     arc_len: jax.Array
 
 
-jax.tree_util.register_dataclass(
-    _Bounds, data_fields=[f.name for f in dataclasses.fields(_Bounds)], meta_fields=[]
-)
+jax.tree_util.register_dataclass(_Bounds, data_fields=[f.name for f in dataclasses.fields(_Bounds)], meta_fields=[])
 
 
 def _min_angle(chord, r):
@@ -151,9 +149,7 @@ class _Task:
     strict: jax.Array  # bool: directions of zero width count as violations too
 
 
-jax.tree_util.register_dataclass(
-    _Task, data_fields=[f.name for f in dataclasses.fields(_Task)], meta_fields=[]
-)
+jax.tree_util.register_dataclass(_Task, data_fields=[f.name for f in dataclasses.fields(_Task)], meta_fields=[])
 
 
 def _pose_terms(design: Design, theta_L, delta, task: _Task, with_defl: bool = True):
@@ -262,12 +258,21 @@ def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool =
     # poses the wires cannot hold without pushing count as a controllability violation too
     penalty = SPREAD_PENALTY * (shortfall + jnp.mean(1.0 - ok))
     wire_cost = task.w_wires * n
-    smooth = (task.w_position * _smooth_max(dp, sharpness)
-              + task.w_deflection * _smooth_max(defl, sharpness) + wire_cost + penalty)
+    smooth = (
+        task.w_position * _smooth_max(dp, sharpness)
+        + task.w_deflection * _smooth_max(defl, sharpness)
+        + wire_cost
+        + penalty
+    )
     worst_dp, worst_defl = jnp.max(dp), jnp.max(defl)
     exact = task.w_position * worst_dp + task.w_deflection * worst_defl + wire_cost
-    pieces = {"worst_dp": worst_dp, "worst_defl": worst_defl, "min_spread": min_spread,
-                  "violations": violations, "statics_infeasible": jnp.sum(~ok)}
+    pieces = {
+        "worst_dp": worst_dp,
+        "worst_defl": worst_defl,
+        "min_spread": min_spread,
+        "violations": violations,
+        "statics_infeasible": jnp.sum(~ok),
+    }
     return smooth, exact, pieces
 
 
@@ -277,9 +282,19 @@ _objective_jit = jax.jit(_objective, static_argnums=(2, 4), compiler_options=fas
 
 def _task(sc: Scenario) -> _Task:
     f = lambda x: jnp.asarray(x, float)
-    return _Task(f(sc.theta_L), f(sc.delta), f(sc.dq), f(sc.load), f(sc.w_position),
-                 f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread), f(sc.delta[0]),
-                 f(_span(sc)), jnp.asarray(sc.strict_controllability))
+    return _Task(
+        f(sc.theta_L),
+        f(sc.delta),
+        f(sc.dq),
+        f(sc.load),
+        f(sc.w_position),
+        f(sc.w_deflection),
+        f(sc.w_wires),
+        f(sc.min_spread),
+        f(sc.delta[0]),
+        f(_span(sc)),
+        jnp.asarray(sc.strict_controllability),
+    )
 
 
 def _span(sc: Scenario) -> float:
@@ -342,23 +357,29 @@ def _bounds(sc: Scenario, n: int) -> _Bounds:
         arc0 = sc.forbidden_arc[1]
         arc_len = 2 * math.pi - (sc.forbidden_arc[1] - sc.forbidden_arc[0])
     f = lambda x: jnp.asarray(x, float)
-    return _Bounds(f(r_lo), f(r_hi), f(sc.wire_stiffness[0]), f(sc.wire_stiffness[1]),
-                   f(sc.wire_diameter + sc.min_wire_gap), f(0.5 * sc.wire_diameter + sc.min_wire_gap),
-                   f(arc0), f(arc_len))
+    return _Bounds(
+        f(r_lo),
+        f(r_hi),
+        f(sc.wire_stiffness[0]),
+        f(sc.wire_stiffness[1]),
+        f(sc.wire_diameter + sc.min_wire_gap),
+        f(0.5 * sc.wire_diameter + sc.min_wire_gap),
+        f(arc0),
+        f(arc_len),
+    )
 
 
 def _base(sc: Scenario, n: int) -> Design:
-    return Design(n, sc.length, max(sc.pitch_radius[1], 1e-3), backbone_EI=sc.backbone_EI,
-                  preload=sc.preload)
+    return Design(n, sc.length, max(sc.pitch_radius[1], 1e-3), backbone_EI=sc.backbone_EI, preload=sc.preload)
 
 
 # ---------------------------------------------------------------------------------------------
 # The run
 # ---------------------------------------------------------------------------------------------
-@functools.partial(jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"),
-                   compiler_options=fast_compile_options())
-def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc,
-                steps, with_defl):
+@functools.partial(
+    jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"), compiler_options=fast_compile_options()
+)
+def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc, steps, with_defl):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
 
     Returns per start: the best rank (exact objective, plus INFEASIBLE_RANK per violating pose); that
@@ -457,16 +478,31 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
     for n in counts:
         r_lo, r_hi = _r_range(sc, n)
         if r_lo > r_hi:
-            rows.append({"n_wires": n, "feasible": False,
-                         "reason": "the geometric constraints leave no room for this many wires"})
+            rows.append(
+                {
+                    "n_wires": n,
+                    "feasible": False,
+                    "reason": "the geometric constraints leave no room for this many wires",
+                }
+            )
             continue
         key, sub = jax.random.split(key)
         bounds, base = _bounds(sc, n), _base(sc, n)
         free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
         z0 = _initial(sub, S=sc.starts, n=n, n_gaps=n + 1 if arc else n)
-        best, out, h = _run_starts(z0, bounds, task, base, jnp.asarray(sc.learning_rate),
-                                   jnp.asarray(sc.sharpness), n=n, free=free, arc=arc, steps=sc.steps,
-                                   with_defl=sc.w_deflection > 0)
+        best, out, h = _run_starts(
+            z0,
+            bounds,
+            task,
+            base,
+            jnp.asarray(sc.learning_rate),
+            jnp.asarray(sc.sharpness),
+            n=n,
+            free=free,
+            arc=arc,
+            steps=sc.steps,
+            with_defl=sc.w_deflection > 0,
+        )
         evaluations += sc.starts * (sc.steps + 1)
         i = int(np.argmin(np.asarray(best)))
         (r, k, angles), exact, pieces = jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out)  # noqa: B023  (called at once)
@@ -488,6 +524,5 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
 def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
     """The exact objective and its pieces for a given design under a scenario (e.g. to check a
     hand-made design, or the evenly spaced one, against the constraints)."""
-    _, exact, pieces = _objective_jit(
-        design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
+    _, exact, pieces = _objective_jit(design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
     return _result_row(sc, design.n_wires, design, exact, pieces)

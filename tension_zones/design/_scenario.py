@@ -54,18 +54,18 @@ DOC: dict[str, str] = {
     "load_N": "[fx, fy, fz] tip force (N, base frame) for the compliance term (paper Sec. 6.2)",
     "preload_N": "wire preload f_min (N), >= 0",
     "weights": "objective weights: position_uncertainty (per mm of worst dp_max), deflection "
-               "(per mm of worst reduced deflection), wire_count (per wire)",
+    "(per mm of worst reduced deflection), wire_count (per wire)",
     "constraints": "outer_diameter_mm (null = no limit), wire_diameter_mm, min_wall_mm (wire hole to "
-                   "outer wall), min_wire_gap_mm (between neighbouring wire holes)",
+    "outer wall), min_wire_gap_mm (between neighbouring wire holes)",
     "min_spread": "controllability: at every task pose the smallest singular value of the taut wires' "
-                  "unit vectors [cos delta_k, sin delta_k] must be at least this (0..1)",
+    "unit vectors [cos delta_k, sin delta_k] must be at least this (0..1)",
     "strict_controllability": "false: controllability lost only on single directions (zero "
-                              "width, e.g. exactly along a wire of four even wires) is reported, "
-                              "not a violation; true: every direction counts",
+    "width, e.g. exactly along a wire of four even wires) is reported, "
+    "not a violation; true: every direction counts",
     "forbidden_arc_deg": "null, or [start, end] (deg, counter-clockwise from x_b) of an arc no wire "
-                         "may occupy (e.g. a tool channel); needs free_wire_angles",
+    "may occupy (e.g. a tool channel); needs free_wire_angles",
     "optimizer": "starts (random restarts), steps (Adam steps per start), learning_rate, sharpness "
-                 "(of the log-sum-exp worst-case surrogate, relative), seed",
+    "(of the log-sum-exp worst-case surrogate, relative), seed",
 }
 
 
@@ -160,8 +160,11 @@ def _grid(key, v, lo, hi, kind="scenario"):
 def _wire_counts(key, v, kind="scenario") -> tuple[int, ...]:
     """A wire count or a list of them (3 to 16), sorted, without repeats."""
     counts = [v] if isinstance(v, int) and not isinstance(v, bool) else v
-    if (not isinstance(counts, (list, tuple)) or not counts
-            or any(isinstance(c, bool) or not isinstance(c, int) or c < 3 or c > 16 for c in counts)):
+    if (
+        not isinstance(counts, (list, tuple))
+        or not counts
+        or any(isinstance(c, bool) or not isinstance(c, int) or c < 3 or c > 16 for c in counts)
+    ):
         raise _err(key, f"must be a list of integers from 3 to 16, got {v!r}", kind)
     return tuple(sorted(set(counts)))
 
@@ -235,8 +238,7 @@ def parse_scenario(d: dict) -> Scenario:
         w_position=_num("weights.position_uncertainty", w["position_uncertainty"], 0.0),
         w_deflection=_num("weights.deflection", w["deflection"], 0.0),
         w_wires=_num("weights.wire_count", w["wire_count"], 0.0),
-        outer_diameter=None if od is None else _num("constraints.outer_diameter_mm", od, 0.0,
-                                                    lo_open=True),
+        outer_diameter=None if od is None else _num("constraints.outer_diameter_mm", od, 0.0, lo_open=True),
         wire_diameter=_num("constraints.wire_diameter_mm", c["wire_diameter_mm"], 0.0),
         min_wall=_num("constraints.min_wall_mm", c["min_wall_mm"], 0.0),
         min_wire_gap=_num("constraints.min_wire_gap_mm", c["min_wire_gap_mm"], 0.0),
@@ -257,8 +259,11 @@ def parse_scenario(d: dict) -> Scenario:
     if all(scen.r_bounds(n)[0] > scen.r_bounds(n)[1] for n in scen.n_wires):
         n = scen.n_wires[0]
         lo, hi = scen.r_bounds(n)
-        raise _err("constraints", f"no pitch radius fits: {n} wires need r >= {lo:.3g} mm for the "
-                                  f"wire gap but the outer diameter allows r <= {hi:.3g} mm")
+        raise _err(
+            "constraints",
+            f"no pitch radius fits: {n} wires need r >= {lo:.3g} mm for the "
+            f"wire gap but the outer diameter allows r <= {hi:.3g} mm",
+        )
     return scen
 
 

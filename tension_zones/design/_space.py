@@ -63,23 +63,23 @@ DEFAULTS: dict[str, Any] = {
 
 DOC: dict[str, str] = {
     "n_wires": "wire count or list of counts (integers 3..16); each count is its own batch and program",
-    "length_mm": "backbone length L (mm): a number, [min, max] or {\"values\": [...]}; > 0",
+    "length_mm": 'backbone length L (mm): a number, [min, max] or {"values": [...]}; > 0',
     "pitch_radius_mm": "pitch radius r (mm), as length_mm; > 0",
     "wire_stiffness_N_per_mm": "wire stiffness k_w (N/mm), as length_mm; > 0 (matters with a load)",
     "backbone_EI_Nmm2": "backbone bending stiffness EI (N mm^2), as length_mm; >= 0 (matters with a load)",
     "preload_N": "wire preload f_min (N), as length_mm; >= 0 (matters with a load)",
     OFFSET: "each wire's angle from its evenly spaced place, (k-1) 360/n + offset_k (deg): a number "
-            "(every wire, i.e. a rotation), or a range / values list sampled per wire (n dimensions); "
-            "its span must stay below 360/n for the largest n",
-    "sample": "method \"grid\" (every combination, \"points\" levels per range) or \"halton\" (the first "
-              "\"designs\" points of a Halton sequence per wire count, the same points for every count)",
+    "(every wire, i.e. a rotation), or a range / values list sampled per wire (n dimensions); "
+    "its span must stay below 360/n for the largest n",
+    "sample": 'method "grid" (every combination, "points" levels per range) or "halton" (the first '
+    '"designs" points of a Halton sequence per wire count, the same points for every count)',
     "theta_L_deg": "[min, max, step] of theta_L (deg) of the workspace grid, both ends included",
     "delta_deg": "[min, max, step] of the bending directions delta (deg), both ends included",
     "joint_uncertainty_mm": "joint-level uncertainty dq (mm) of the uncertainty bounds (paper Sec. 4)",
     "load_N": "null, or the tip force [fx, fy, fz] (N, base frame; or 6 wrench components) that adds "
-              "the compliance statistics (paper Sec. 5-6.2)",
+    "the compliance statistics (paper Sec. 5-6.2)",
     "chunks": "designs (per compiled call: the unit of progress and resuming) and poses (per step of "
-              "each design's loop); part of an exploration's identity",
+    "each design's loop); part of an exploration's identity",
 }
 
 
@@ -126,11 +126,17 @@ class Space:
             return {}
         if self.method == "halton":
             u = halton(self.designs, len(dims))
-            return {key: (v[0] + u[:, j] * (v[1] - v[0]) if kind == "range"
-                          else np.asarray(v)[np.minimum((u[:, j] * len(v)).astype(int), len(v) - 1)])
-                    for j, (key, kind, v) in enumerate(dims)}
-        levels = [np.linspace(v[0], v[1], self.points) if kind == "range" else np.asarray(v, float)
-                  for _, kind, v in dims]
+            return {
+                key: (
+                    v[0] + u[:, j] * (v[1] - v[0])
+                    if kind == "range"
+                    else np.asarray(v)[np.minimum((u[:, j] * len(v)).astype(int), len(v) - 1)]
+                )
+                for j, (key, kind, v) in enumerate(dims)
+            }
+        levels = [
+            np.linspace(v[0], v[1], self.points) if kind == "range" else np.asarray(v, float) for _, kind, v in dims
+        ]
         index = np.unravel_index(np.arange(self.count(n)), [len(x) for x in levels])  # first slowest
         return {key: lv[i] for (key, _, _), lv, i in zip(dims, levels, index)}
 
@@ -194,6 +200,7 @@ def _primes(count: int) -> list[int]:
 def _field(key, v, lo=None, lo_open=False):
     """A design field: a number, ``[min, max]`` (min < max) or ``{"values": [...]}`` (non-empty,
     no repeats) -> ``(kind, numbers)``."""
+
     def num(x):
         return _num(key, x, lo, lo_open=lo_open, kind=KIND)
 
@@ -207,7 +214,7 @@ def _field(key, v, lo=None, lo_open=False):
         return "values", vals
     if isinstance(v, (list, tuple)):
         if len(v) != 2:
-            raise _err(key, f"must be a number, [min, max] or {{\"values\": [...]}}, got {v!r}", KIND)
+            raise _err(key, f'must be a number, [min, max] or {{"values": [...]}}, got {v!r}', KIND)
         a, b = (num(x) for x in v)
         if a > b:
             raise _err(key, f"min {a} is larger than max {b}", KIND)
@@ -224,11 +231,15 @@ def _positive_int(key, v):
 def _sample(given: Any) -> tuple[str, int, int]:
     s = _merge("sample", given, DEFAULTS["sample"], KIND)
     if s["method"] not in ("grid", "halton"):
-        raise _err("sample.method", f"must be \"grid\" or \"halton\", got {s['method']!r}", KIND)
+        raise _err("sample.method", f'must be "grid" or "halton", got {s["method"]!r}', KIND)
     other = "designs" if s["method"] == "grid" else "points"
     if other in given:
-        raise _err(f"sample.{other}", f"does not go with method {s['method']!r} (a grid takes "
-                                      "'points' per range, a Halton sample a number of 'designs')", KIND)
+        raise _err(
+            f"sample.{other}",
+            f"does not go with method {s['method']!r} (a grid takes "
+            "'points' per range, a Halton sample a number of 'designs')",
+            KIND,
+        )
     points = _positive_int("sample.points", s["points"])
     if points < 2:
         raise _err("sample.points", "must be at least 2 (the two ends of each range)", KIND)
@@ -244,8 +255,12 @@ def parse_space(d: dict) -> Space:
     fields[OFFSET] = _field(OFFSET, raw[OFFSET])
     kind, v = fields[OFFSET]
     if kind != "fixed" and max(v) - min(v) >= 360.0 / max(counts):
-        raise _err(OFFSET, f"spans {max(v) - min(v):g} deg, must stay below 360/n = "
-                           f"{360.0 / max(counts):g} deg for {max(counts)} wires (wires would meet)", KIND)
+        raise _err(
+            OFFSET,
+            f"spans {max(v) - min(v):g} deg, must stay below 360/n = "
+            f"{360.0 / max(counts):g} deg for {max(counts)} wires (wires would meet)",
+            KIND,
+        )
     try:  # the largest radius against the shortest length: every design of the space is valid
         _check_radius(min(fields["length_mm"][1]), max(fields["pitch_radius_mm"][1]), names=("max", "min length_mm"))
     except ValueError as e:
@@ -274,10 +289,17 @@ def parse_space(d: dict) -> Space:
     for n in counts:
         if space.count(n) > MAX_DESIGNS:
             if method == "halton":
-                raise _err("sample.designs", f"{space.count(n):.3g} designs for {n} wires, more than "
-                                             f"{MAX_DESIGNS:.0e}: fewer designs", KIND)
-            raise _err("sample", f"the grid has {space.count(n):.3g} designs for {n} wires, more than "
-                                 f"{MAX_DESIGNS:.0e}: fewer points, or method \"halton\"", KIND)
+                raise _err(
+                    "sample.designs",
+                    f"{space.count(n):.3g} designs for {n} wires, more than {MAX_DESIGNS:.0e}: fewer designs",
+                    KIND,
+                )
+            raise _err(
+                "sample",
+                f"the grid has {space.count(n):.3g} designs for {n} wires, more than "
+                f'{MAX_DESIGNS:.0e}: fewer points, or method "halton"',
+                KIND,
+            )
     return space
 
 

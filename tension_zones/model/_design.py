@@ -205,8 +205,11 @@ class Design:
         design = cls(**kw)
         missing = missing_physical_keys(d) if warn_missing else []
         if missing:
-            used = {"wire_stiffness_N_per_mm": design.wire_stiffness,
-                    "backbone_EI_Nmm2": design.backbone_EI, "preload_N": design.preload}
+            used = {
+                "wire_stiffness_N_per_mm": design.wire_stiffness,
+                "backbone_EI_Nmm2": design.backbone_EI,
+                "preload_N": design.preload,
+            }
             named = ", ".join(f"{k!r} (default {float(used[k]):g} used)" for k in missing)
             warnings.warn(f"design leaves out {named}", MissingDesignKeyWarning, stacklevel=2)
         return design
@@ -322,8 +325,13 @@ def read_json(path, what: str):
     name = f"{what} {str(path)!r}"
     try:
         text = path.read_text(encoding="utf-8-sig")
-        value = json.loads(text, object_pairs_hook=_unique_keys, parse_constant=_NonFinite,
-                           parse_float=_finite_float, parse_int=_finite_int)
+        value = json.loads(
+            text,
+            object_pairs_hook=_unique_keys,
+            parse_constant=_NonFinite,
+            parse_float=_finite_float,
+            parse_int=_finite_int,
+        )
         _check_tree(value)
         return value
     except FileNotFoundError:
@@ -397,8 +405,10 @@ def _check_radius(length, pitch_radius, names=("pitch_radius", "length")) -> Non
         return
     r, L = float(np.asarray(pitch_radius)), float(np.asarray(length))
     if r > MAX_RADIUS_PER_LENGTH * L:
-        raise ValueError(f"{names[0]} {r:g} mm is more than half the {names[1]} {L:g} mm: a wire that far out meets "
-                         f"the centre of curvature before the segment bends {1 / MAX_RADIUS_PER_LENGTH:g} rad")
+        raise ValueError(
+            f"{names[0]} {r:g} mm is more than half the {names[1]} {L:g} mm: a wire that far out meets "
+            f"the centre of curvature before the segment bends {1 / MAX_RADIUS_PER_LENGTH:g} rad"
+        )
 
 
 def _check_angles(angles, n_wires: int, field: str = "wire_angles") -> None:

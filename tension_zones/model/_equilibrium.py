@@ -131,9 +131,7 @@ class Load:
         return cls(z, z)
 
 
-jax.tree_util.register_pytree_node(
-    Load, lambda x: ((x.tip_force, x.gravity), None), lambda _, c: Load(*c)
-)
+jax.tree_util.register_pytree_node(Load, lambda x: ((x.tip_force, x.gravity), None), lambda _, c: Load(*c))
 
 
 def _guarded_norm(b):
@@ -189,8 +187,11 @@ def load_jacobians(lengths, x):
     Jv, Jw = jnp.einsum("sij,sjk->sik", R0, J[:, :3]), jnp.einsum("sij,sjk->sik", R0, J[:, 3:])
     cross = jax.vmap(lambda a, m: skew(a) @ m)
     Gt = Jv - cross(tip[None, :] - ends, Jw)
-    Gm = (L_out[:, None, None] * Jv - cross(M_out - L_out[:, None] * ends, Jw)
-          + jnp.einsum("sij,sjk->sik", R0, jax.vmap(segment_weight_moment_jacobian)(lengths, B)))
+    Gm = (
+        L_out[:, None, None] * Jv
+        - cross(M_out - L_out[:, None] * ends, Jw)
+        + jnp.einsum("sij,sjk->sik", R0, jax.vmap(segment_weight_moment_jacobian)(lengths, B))
+    )
     return jnp.concatenate(list(Gt), axis=1), jnp.concatenate(list(Gm), axis=1)
 
 
@@ -466,8 +467,9 @@ class _Sample:
         P = self.crosses.shape[1]
         T = self.piece_factors(x)
         stretch = self.stretch(x) if s is None else s
-        rest = ((self.A * self._spread(T)).T @ self.tension_matrix(x, s=stretch) @ self.A
-                - self.wire_hessian(x, t, s=s_t))
+        rest = (self.A * self._spread(T)).T @ self.tension_matrix(x, s=stretch) @ self.A - self.wire_hessian(
+            x, t, s=s_t
+        )
         B = x.reshape(-1, 2)
         nb = _guarded_norm(B)
         unit = B / jnp.where(nb > 0, nb, 1.0)[:, None]  # d|b|/db, 0 at b = 0
@@ -539,8 +541,9 @@ def _newton(sm: _Sample, x0, HL0):
 
         def next_step(c):
             s = steps[c[0]]
-            ok = (sm.value(x + s * d, t, short) + s * jnp.dot(rest, d)
-                  <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (1.0 + jnp.abs(v0)))
+            ok = sm.value(x + s * d, t, short) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (
+                1.0 + jnp.abs(v0)
+            )
             return jnp.where(ok, c[0], c[0] + 1), ok
 
         j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
@@ -796,8 +799,9 @@ def wire_tensions(robot: Robot, B, q):
 def energy(robot: Robot, B, q, load: Load | None = None):
     """Potential energy ``V(B)`` (N mm) for commanded wire displacements ``q`` (N,) (no friction)."""
     phys, f = _phys(robot, load)
-    sm = _Sample(phys, robot.structure, jnp.asarray(q, phys["length"].dtype), f, jnp.zeros(robot.n_wires),
-                 jnp.asarray(True))
+    sm = _Sample(
+        phys, robot.structure, jnp.asarray(q, phys["length"].dtype), f, jnp.zeros(robot.n_wires), jnp.asarray(True)
+    )
     return sm.value(jnp.asarray(B, phys["length"].dtype).reshape(-1), jnp.ones(robot.n_wires))
 
 

@@ -204,8 +204,11 @@ class Robot:
                 used = np.asarray(arr)[self.crosses]
                 if not np.all(np.isfinite(used)):
                     raise ValueError(f"{name} must be finite where a wire crosses a segment")
-        if (route_radii is not None and not isinstance(rr, jax.core.Tracer)
-                and np.any(np.asarray(rr)[self.crosses] <= 0)):
+        if (
+            route_radii is not None
+            and not isinstance(rr, jax.core.Tracer)
+            and np.any(np.asarray(rr)[self.crosses] <= 0)
+        ):
             raise ValueError("route_radii must be positive where a wire crosses a segment")
         object.__setattr__(self, "route_angles", ra.astype(own_a.dtype))
         object.__setattr__(self, "route_radii", rr.astype(own_a.dtype))
@@ -283,11 +286,18 @@ class Robot:
         ``curvature_freedom`` (S,), one (a segment solved in pieces is an elastic rod, see
         :mod:`._equilibrium`)."""
         dt = self.route_angles.dtype
-        return {"length": self.lengths.astype(dt), "EI": self.backbone_EI.astype(dt),
-                "curvature_freedom": jnp.ones(self.n_segments, dt),
-                "route_angles": self.route_angles, "route_radii": self.route_radii,
-                "wire_stiffness": self.wire_stiffness.astype(dt), "preload": self.preload.astype(dt),
-                "friction": jnp.zeros(2, dt), "gravity": jnp.zeros(3, dt), "clearance": jnp.zeros(2, dt)}
+        return {
+            "length": self.lengths.astype(dt),
+            "EI": self.backbone_EI.astype(dt),
+            "curvature_freedom": jnp.ones(self.n_segments, dt),
+            "route_angles": self.route_angles,
+            "route_radii": self.route_radii,
+            "wire_stiffness": self.wire_stiffness.astype(dt),
+            "preload": self.preload.astype(dt),
+            "friction": jnp.zeros(2, dt),
+            "gravity": jnp.zeros(3, dt),
+            "clearance": jnp.zeros(2, dt),
+        }
 
     # -- kinematics of one configuration B (S, 2) ----------------------------------------------
     def _B(self, B):
@@ -406,8 +416,8 @@ class Robot:
         for j, (seg, route) in enumerate(zip(designs, routes)):
             for key, arr, scale in (("route_angles_deg", ra, np.pi / 180), ("route_radii_mm", rr, 1.0)):
                 if key in route:
-                    arr[k0:k0 + seg.n_wires, :j] = _routing_entry(route[key], j, seg.n_wires, key) * scale
-                    given[k0:k0 + seg.n_wires, :j] = True
+                    arr[k0 : k0 + seg.n_wires, :j] = _routing_entry(route[key], j, seg.n_wires, key) * scale
+                    given[k0 : k0 + seg.n_wires, :j] = True
             k0 += seg.n_wires
         _check_holes(robot, ra, rr, given)
         return cls(designs, route_angles=ra, route_radii=rr)
@@ -456,8 +466,11 @@ def _warn_missing(designs, dicts) -> None:
     """One warning naming each segment's physical keys left out of the file (defaults used)."""
     parts = []
     for i, (seg, d) in enumerate(zip(designs, dicts)):
-        used = {"wire_stiffness_N_per_mm": seg.wire_stiffness, "backbone_EI_Nmm2": seg.backbone_EI,
-                "preload_N": seg.preload}
+        used = {
+            "wire_stiffness_N_per_mm": seg.wire_stiffness,
+            "backbone_EI_Nmm2": seg.backbone_EI,
+            "preload_N": seg.preload,
+        }
         missing = missing_physical_keys(d)
         if missing:
             parts.append(f"segment {i}: " + ", ".join(f"{k!r} (default {float(used[k]):g} used)" for k in missing))
@@ -474,30 +487,36 @@ def _check_holes(robot: Robot, ra, rr, given) -> None:
     for j in range(robot.n_segments):
         ks = np.flatnonzero(robot.crosses[:, j])
         for a, k in enumerate(ks):
-            for m in ks[a + 1:]:
+            for m in ks[a + 1 :]:
                 if not (given[k, j] or given[m, j]):
                     continue
                 gap = abs((ra[k, j] - ra[m, j] + np.pi) % (2 * np.pi) - np.pi)
                 if gap <= 1e-9 and abs(rr[k, j] - rr[m, j]) <= 1e-9 * max(rr[k, j], 1.0):
                     w, o = (m, k) if given[m, j] else (k, m)
                     wire, other = (f"wire {x - first[owner[x]] + 1} of segment {owner[x]}" for x in (w, o))
-                    raise ValueError(f"segment {owner[w]}: its routing runs {wire} through segment {j} in the "
-                                     f"hole of {other} ({np.degrees(ra[o, j]):g} deg, radius {rr[o, j]:g} mm); "
-                                     "each wire needs its own hole")
+                    raise ValueError(
+                        f"segment {owner[w]}: its routing runs {wire} through segment {j} in the "
+                        f"hole of {other} ({np.degrees(ra[o, j]):g} deg, radius {rr[o, j]:g} mm); "
+                        "each wire needs its own hole"
+                    )
 
 
 def _routing_entry(value, j: int, n: int, key: str) -> np.ndarray:
     """A segment's ``route_*`` entry as an (n, j) array, or a one-line error naming the key."""
     if j == 0:
-        raise ValueError(f"segment 0: {key} has no place on the first segment (it gives a wire's path through the "
-                         "segments before its own, and none lies before segment 0)")
+        raise ValueError(
+            f"segment 0: {key} has no place on the first segment (it gives a wire's path through the "
+            "segments before its own, and none lies before segment 0)"
+        )
     try:
         a = np.asarray(value, dtype=float)
     except (TypeError, ValueError):
         raise ValueError(f"segment {j}: {key} must be a list of {n} lists of {j} numbers") from None
     if a.shape != (n, j):
-        raise ValueError(f"segment {j}: {key} must be a list of {n} lists (one per wire) of {j} numbers "
-                         f"(segments 0..{j - 1}), got shape {a.shape}")
+        raise ValueError(
+            f"segment {j}: {key} must be a list of {n} lists (one per wire) of {j} numbers "
+            f"(segments 0..{j - 1}), got shape {a.shape}"
+        )
     if not np.all(np.isfinite(a)):
         raise ValueError(f"segment {j}: {key} must be finite")
     if key == "route_radii_mm" and np.any(a <= 0):

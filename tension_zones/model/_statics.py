@@ -66,9 +66,7 @@ def as_wrench(wrench) -> jnp.ndarray:
     """
     w = jnp.asarray(wrench, dtype=jnp.result_type(float))
     if w.shape not in ((3,), (6,)):
-        raise ValueError(
-            f"a wrench must have 3 (force) or 6 (force, moment) components, got shape {w.shape}"
-        )
+        raise ValueError(f"a wrench must have 3 (force) or 6 (force, moment) components, got shape {w.shape}")
     if not isinstance(w, jax.core.Tracer) and not np.all(np.isfinite(np.asarray(w))):
         raise ValueError(f"a wrench must be finite, got {np.asarray(w).tolist()}")
     return jnp.concatenate([w, jnp.zeros(6 - w.shape[0], w.dtype)])
@@ -129,8 +127,10 @@ def _choose_free_set(A, rhs, f_min):
         y = [lam0 * A[0, k] + lam1 * A[1, k] for k in range(len(free))]  # A^T lam
         tau = [jnp.where(f, yk, f_min) for f, yk in zip(free, y)]
         wrong = functools.reduce(jnp.maximum, [jnp.where(f, f_min - yk, yk - f_min) for f, yk in zip(free, y)])
-        miss = (jnp.abs(sum(t * A[0, k] for k, t in enumerate(tau)) - rhs[0])
-                + jnp.abs(sum(t * A[1, k] for k, t in enumerate(tau)) - rhs[1])) * inv_norm_A
+        miss = (
+            jnp.abs(sum(t * A[0, k] for k, t in enumerate(tau)) - rhs[0])
+            + jnp.abs(sum(t * A[1, k] for k, t in enumerate(tau)) - rhs[1])
+        ) * inv_norm_A
         return jnp.maximum(wrong, 0.0) + miss
 
     def lam_of(j):
@@ -184,6 +184,7 @@ def _arc_free_mask(A, rhs, f_min):
     order = jnp.argsort(jnp.arctan2(A[1], A[0]))  # the wires in angular order
     a0, a1 = A[0][order], A[1][order]
     start, length = _arc_runs(n)
+
     # sums over each run by differences of prefix sums over the wires twice round (no (K, n) array:
     # K = n^2 + 1 runs; at 256 wires that would be 134 MB of constants)
     def run_sum(x):
@@ -217,11 +218,14 @@ def _arc_free_mask(A, rhs, f_min):
     def y(k):  # a_k . lam of each candidate's wire k
         return a0[k] * lam0 + a1[k] * lam1
 
-    wrong = jnp.maximum(jnp.maximum(f_min - y(first), f_min - y(last)),
-                        jnp.where(inside, jnp.maximum(y(before), y(after)) - f_min, -jnp.inf))
+    wrong = jnp.maximum(
+        jnp.maximum(f_min - y(first), f_min - y(last)),
+        jnp.where(inside, jnp.maximum(y(before), y(after)) - f_min, -jnp.inf),
+    )
     wrong = jnp.where(length > 0, jnp.maximum(wrong, 0.0), 0.0)  # the empty set: lam = 0, all bound
-    miss = (jnp.abs(g00 * lam0 + g01 * lam1 + c0 - rhs[0])
-            + jnp.abs(g01 * lam0 + g11 * lam1 + c1 - rhs[1])) * inv_norm_A
+    miss = (
+        jnp.abs(g00 * lam0 + g01 * lam1 + c0 - rhs[0]) + jnp.abs(g01 * lam0 + g11 * lam1 + c1 - rhs[1])
+    ) * inv_norm_A
     viol = jnp.where(runs | (length == 0), wrong + miss, jnp.inf)
     best = jnp.argmin(viol)  # the first of least violation
     # the chosen run's wires, in angular order
@@ -255,12 +259,10 @@ def min_norm_tensions(A, rhs, f_min) -> TensionSolution:
         free = jnp.stack([(chosen >> (n - 1 - k)) & 1 for k in range(n)]).astype(dt)
     fr, a0, a1 = per_wire(free), per_wire(A[0]), per_wire(A[1])
     P0, P1 = pinv_tall2_cols(wmap(lambda x, f: x * f, a0, fr), wmap(lambda x, f: x * f, a1, fr))
-    r = [rhs[i] - f_min * wsum(wmap(lambda x, f: x * (1.0 - f), ai, fr))
-         for i, ai in enumerate((a0, a1))]
+    r = [rhs[i] - f_min * wsum(wmap(lambda x, f: x * (1.0 - f), ai, fr)) for i, ai in enumerate((a0, a1))]
     t = wmap(lambda p0, p1: p0 * r[0] + p1 * r[1], P0, P1)  # pinv(A_S)^T r: the free tensions
     tau = wstack(wmap(lambda tk, f: tk + f_min * (1.0 - f), t, fr))
-    lam = jnp.stack([wsum(wmap(lambda p, tk: p * tk, P0, t)),
-                     wsum(wmap(lambda p, tk: p * tk, P1, t))])
+    lam = jnp.stack([wsum(wmap(lambda p, tk: p * tk, P0, t)), wsum(wmap(lambda p, tk: p * tk, P1, t))])
     res = kkt_residual(A, rhs, f_min, tau, lam)
     return TensionSolution(tau, lam, res <= KKT_TOL, res)
 
@@ -275,10 +277,8 @@ def kkt_residual(A, rhs, f_min, tau, lam):
     """
     a0, a1, tk = per_wire(A[0]), per_wire(A[1]), per_wire(tau)
     norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
-    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i]
-                    for i, ai in enumerate((a0, a1))])
-    station = wmax(wmap(lambda t, x, y: jnp.abs(t - jnp.maximum(f_min, x * lam[0] + y * lam[1])),
-                        tk, a0, a1))
+    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i] for i, ai in enumerate((a0, a1))])
+    station = wmax(wmap(lambda t, x, y: jnp.abs(t - jnp.maximum(f_min, x * lam[0] + y * lam[1])), tk, a0, a1))
     max_tau = wmax(wmap(jnp.abs, tk))
     scale = _norm(rhs) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
     return (primal + station * norm_A) / scale

@@ -30,8 +30,7 @@ def fig13(grids, path: Path):
     """2 x 4 panels: rows linear / angular; columns reduced / traditional x preload 0 / 5 N."""
     import matplotlib.pyplot as plt
 
-    cols = [("reduced", 0.0, "a", "b"), ("reduced", 5.0, "c", "d"),
-            ("full", 0.0, "e", "f"), ("full", 5.0, "g", "h")]
+    cols = [("reduced", 0.0, "a", "b"), ("reduced", 5.0, "c", "d"), ("full", 0.0, "e", "f"), ("full", 5.0, "g", "h")]
     fig, axes = plt.subplots(2, 4, figsize=(17, 7.5), sharex=True, sharey="row")
     for j, (mode, pre, la, lb) in enumerate(cols):
         name = "reduced" if mode == "reduced" else "traditional"
@@ -47,8 +46,11 @@ def fig13(grids, path: Path):
             ax.set_xticks(np.arange(0, 361, 60))
             ax.grid(alpha=0.3)
             ax.legend(fontsize=8, loc="upper right")
-    fig.suptitle("Fig. 13: tip deflection under w = [5 N, 0, 0, 0, 0, 0] (base frame), k_w = 75 N/mm; "
-                 r"line: mean over $\theta_L$ = 89..45 deg, band: min-max", fontsize=11)
+    fig.suptitle(
+        "Fig. 13: tip deflection under w = [5 N, 0, 0, 0, 0, 0] (base frame), k_w = 75 N/mm; "
+        r"line: mean over $\theta_L$ = 89..45 deg, band: min-max",
+        fontsize=11,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -86,22 +88,33 @@ def fig14(grids, path: Path):
 
 
 def _table_text(table, fit, ratios):
-    rows = ["Identified (Levenberg-Marquardt on the twelve means of Tables 1-2):",
-            (f"  L = {fit['length_mm']:.3f} mm, r = {fit['pitch_radius_mm']:.3f} mm, "
+    rows = [
+        "Identified (Levenberg-Marquardt on the twelve means of Tables 1-2):",
+        (
+            f"  L = {fit['length_mm']:.3f} mm, r = {fit['pitch_radius_mm']:.3f} mm, "
             f"EI = {fit['backbone_EI_Nmm2']:.2f} N mm^2; mean |relative error| = "
-            f"{100 * fit['mean_relative_error']:.2f} %"), "",
-            "Tables 1-2 (reduced, no preload): ours vs paper, mean (SD); error of the mean",
-            f"{'wires':>5} {'k_w':>5} {'position (mm)':>34} {'angle (deg)':>34}"]
+            f"{100 * fit['mean_relative_error']:.2f} %"
+        ),
+        "",
+        "Tables 1-2 (reduced, no preload): ours vs paper, mean (SD); error of the mean",
+        f"{'wires':>5} {'k_w':>5} {'position (mm)':>34} {'angle (deg)':>34}",
+    ]
     err = dict(zip(FIT_KEYS, fit["relative_errors"]))
     for n in (3, 4):
         for k in (55, 75, 105):
             o, p = table[str(n)][str(k)], PAPER_TABLE[n][k]
             rows.append(
                 f"{n:>5} {k:>5} {o[0]:7.3f} ({o[1]:.3f}) vs {p[0]:6.3f} ({p[1]:.3f}) {100 * err[(n, k, 'mm')]:+5.1f}%"
-                f" {o[2]:7.2f} ({o[3]:.2f}) vs {p[2]:6.2f} ({p[3]:.2f}) {100 * err[(n, k, 'deg')]:+5.1f}%")
-    rows += ["", ("Reduced / traditional mean position deflection (k_w = 75, no preload): "
-             f"3 wires {ratios['3']:.3f} (paper: +206 % = {PAPER_REDUCED_OVER_TRADITIONAL_3}), "
-             f"4 wires {ratios['4']:.3f}")]
+                f" {o[2]:7.2f} ({o[3]:.2f}) vs {p[2]:6.2f} ({p[3]:.2f}) {100 * err[(n, k, 'deg')]:+5.1f}%"
+            )
+    rows += [
+        "",
+        (
+            "Reduced / traditional mean position deflection (k_w = 75, no preload): "
+            f"3 wires {ratios['3']:.3f} (paper: +206 % = {PAPER_REDUCED_OVER_TRADITIONAL_3}), "
+            f"4 wires {ratios['4']:.3f}"
+        ),
+    ]
     return "\n".join(rows)
 
 
@@ -112,13 +125,13 @@ def compliance_step(out: Path, summary: dict, quiet: bool) -> list[Path]:
     grids = {}
     for n in (3, 4):
         for k in K_VALUES:
-            for pre in ((0.0, 5.0) if k == 75.0 else (0.0,)):
+            for pre in (0.0, 5.0) if k == 75.0 else (0.0,):
                 d = Design(n, L, r, wire_stiffness=k, backbone_EI=EI, preload=pre)
                 grids[(n, k, pre)] = compliance_grid(d, PAPER_WRENCH)
-    table = {str(n): {str(int(k)): _stats(grids[(n, k, 0.0)], "reduced") for k in (55.0, 75.0, 105.0)}
-             for n in (3, 4)}
-    ratios = {str(n): _stats(grids[(n, 75.0, 0.0)], "reduced")[0] / _stats(grids[(n, 75.0, 0.0)], "full")[0]
-              for n in (3, 4)}
+    table = {str(n): {str(int(k)): _stats(grids[(n, k, 0.0)], "reduced") for k in (55.0, 75.0, 105.0)} for n in (3, 4)}
+    ratios = {
+        str(n): _stats(grids[(n, 75.0, 0.0)], "reduced")[0] / _stats(grids[(n, 75.0, 0.0)], "full")[0] for n in (3, 4)
+    }
     summary["compliance"] = {
         "identified": {"length_mm": L, "pitch_radius_mm": r, "backbone_EI_Nmm2": EI},
         "table": table,

@@ -95,8 +95,7 @@ def _fit(init, target, maxiter):
     """The package's least-squares solver (:func:`tension_zones._lsq.levenberg_marquardt`) on the twelve
     relative errors, in log-parameters; a step whose residuals are not finite (some workspace pose
     loses stability and its deflection is flagged NaN) is rejected like any step that does not descend."""
-    theta, _, iterations, r, _ = levenberg_marquardt(lambda p: _residuals(p, target), init, max_iter=maxiter,
-                                                     tol=1e-14)
+    theta, _, iterations, r, _ = levenberg_marquardt(lambda p: _residuals(p, target), init, max_iter=maxiter, tol=1e-14)
     return theta, iterations, r[:, 0]
 
 
@@ -116,9 +115,7 @@ def identify(initial=None, maxiter: int = 50):
     for guess in starts:
         start = np.asarray(guess, dtype=float)
         if start.shape != (3,) or not np.all(np.isfinite(start)) or np.any(start <= 0):
-            raise ValueError(
-                f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}"
-            )
+            raise ValueError(f"initial (L, r, EI) must be three positive numbers, got {start.tolist()}")
         init = np.log(start)
         p, its, r = _fit(jnp.asarray(init), target, maxiter)
         p, its, r = np.asarray(p), int(its), np.asarray(r)

@@ -30,15 +30,14 @@ def _tension_maps(out: Path, summary: dict, quiet: bool) -> list[Path]:
         fig.savefig(path, dpi=130, bbox_inches="tight")
         plt.close(fig)
         written.append(path)
-        tables[str(n)] = [
-            {"delta_deg": str(s), "wires": list(s.wires)} for s in tmap.sectors
-        ]
+        tables[str(n)] = [{"delta_deg": str(s), "wires": list(s.wires)} for s in tmap.sectors]
     # one taut wire fraction of directions, the figure a designer reads off Figs. 5 and 7
     summary["tension_maps"] = {
         "sectors": tables,
         "one_taut_wire_fraction": {
-            str(n): float(np.mean([len(tension_map(Design(n, 20.0, 2.0)).taut_at(d)) == 1
-                                   for d in np.arange(0.0, 360.0, 0.25)]))
+            str(n): float(
+                np.mean([len(tension_map(Design(n, 20.0, 2.0)).taut_at(d)) == 1 for d in np.arange(0.0, 360.0, 0.25)])
+            )
             for n in (3, 4)
         },
     }

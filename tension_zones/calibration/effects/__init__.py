@@ -26,9 +26,27 @@ from .wire_angle_offset import WireAngleOffset
 from .wire_stiffness import WireStiffness
 
 #: Every effect, in the order reports list them.
-ALL = (BackboneEI(), PatternRotation(), Offset(), Registration(), Backlash(), Friction(), WireAngleOffset(),
-       RoutingTwist(), WireStiffness(), Preload(), TipForce(), Gravity(), VariableCurvature(), Clearance(), Compression(), Drift(),
-       BendingFriction(), Marker(), Geometry())
+ALL = (
+    BackboneEI(),
+    PatternRotation(),
+    Offset(),
+    Registration(),
+    Backlash(),
+    Friction(),
+    WireAngleOffset(),
+    RoutingTwist(),
+    WireStiffness(),
+    Preload(),
+    TipForce(),
+    Gravity(),
+    VariableCurvature(),
+    Clearance(),
+    Compression(),
+    Drift(),
+    BendingFriction(),
+    Marker(),
+    Geometry(),
+)
 #: Always fitted, by the frame of the data: positions in the robot's base frame (tension_zones/MODEL.md Sec. 6), or
 #: in an unregistered tracker frame, whose origin and tilt are never known, nor which way each segment's
 #: wires point (the registration leaves the turn about the axis to the patterns' rotations).
@@ -50,14 +68,41 @@ def library(frame: str = "base", opt_in=()) -> tuple[Effect, ...]:
     unknown = [n for n in opt_in if n not in OPT_IN]
     if unknown:
         raise ValueError(f"{unknown[0]!r} is not an opt-in effect (those are: {', '.join(OPT_IN)})")
-    return tuple(e for e in ALL if e.name not in NOMINAL[frame] + EXCLUDED[frame]
-                 and (e.name not in OPT_IN or e.name in opt_in))
+    return tuple(
+        e for e in ALL if e.name not in NOMINAL[frame] + EXCLUDED[frame] and (e.name not in OPT_IN or e.name in opt_in)
+    )
 
 
 def nominal(frame: str = "base") -> tuple[Effect, ...]:
     return tuple(BY_NAME[n] for n in NOMINAL[frame])
 
 
-__all__ = ["ALL", "BY_NAME", "NOMINAL", "OPT_IN", "BackboneEI", "Backlash", "BendingFriction", "Clearance", "Compression", "Drift", "Effect", "Friction", "Geometry", "Gravity",
-           "Marker", "Offset", "PatternRotation", "Preload", "Registration", "RoutingTwist", "TipForce", "VariableCurvature", "WireAngleOffset", "WireStiffness",
-           "library", "nominal", "play"]
+__all__ = [
+    "ALL",
+    "BY_NAME",
+    "NOMINAL",
+    "OPT_IN",
+    "BackboneEI",
+    "Backlash",
+    "BendingFriction",
+    "Clearance",
+    "Compression",
+    "Drift",
+    "Effect",
+    "Friction",
+    "Geometry",
+    "Gravity",
+    "Marker",
+    "Offset",
+    "PatternRotation",
+    "Preload",
+    "Registration",
+    "RoutingTwist",
+    "TipForce",
+    "VariableCurvature",
+    "WireAngleOffset",
+    "WireStiffness",
+    "library",
+    "nominal",
+    "play",
+]

@@ -40,5 +40,4 @@ class Registration(Effect):
         w = theta[:3] * jnp.stack([1.0, 1.0, 1.0 - on.get("pattern_rotation", 0.0)])
         R = rotvec_to_matrix(w)
         t = theta[3:] * (1.0 - on.get("offset", 0.0))
-        return replace(out, p=jnp.einsum("ij,nj->ni", R, out["p"]) + t,
-                       R=jnp.einsum("ij,njk->nik", R, out["R"]))
+        return replace(out, p=jnp.einsum("ij,nj->ni", R, out["p"]) + t, R=jnp.einsum("ij,njk->nik", R, out["R"]))

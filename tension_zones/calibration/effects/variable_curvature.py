@@ -23,8 +23,10 @@ from ._base import Effect, replace
 @dataclasses.dataclass(frozen=True)
 class VariableCurvature(Effect):
     name = "variable_curvature"
-    doc = ("curvature varying along each segment as in an elastic rod under the loads (0 = constant "
-           "curvature, 1 = elastic rod)")
+    doc = (
+        "curvature varying along each segment as in an elastic rod under the loads (0 = constant "
+        "curvature, 1 = elastic rod)"
+    )
     scored_on = True
     needs_load = True
 
