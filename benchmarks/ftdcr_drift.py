@@ -3,8 +3,7 @@
     python benchmarks/ftdcr_drift.py
 
 The ``drift`` effect (one rate for every wire's length over the recording's time) lowers the FTDCR v4
-held-out and validation errors when it is added, but the loop does not add it (``benchmarks/README.md``,
-*A drift of the wires?*). A drift is a function of time; this script asks whether the data say so.
+held-out and validation errors when it is added. A drift is a function of time; this script asks whether the data say so.
 Starting from the shipped report's final model it refits, on every sample of ``train.csv``:
 
 - the model with the drift (its rate, and ``val.csv`` predicted with the drift held at the training

@@ -14,7 +14,7 @@ and asks where the residual's dependence on the acquisition order comes from (th
 - **tracker latency**: the residual along the predicted direction of motion (a late tracker lags: a
   negative mean);
 - the RMSE per pattern family, and how far the tip moves from home, measured against predicted.
-Prints a Markdown summary (the numbers in ``benchmarks/README.md``, *What is left on the FTDCR v4*).
+Prints a Markdown summary.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ file, the column and the row (``row`` = 1-based data row, the header not counted
 the table parsing (UTF-8 with or without a byte-order mark; comma, semicolon or tab delimiters), the
 bad-cell rules and ``drop_bad`` (isolated bad rows are dropped and listed instead of failing).
 
-Formats (the full description with examples is in ``tension_zones/calibration/README.md``):
+Formats (the full description with examples is in ``docs/pages/formats.md``):
 
 * ``model`` (tension_zones/MODEL.md Sec. 6): ``sample, q1..qn, fx, fy, fz, px, py, pz, rx, ry, rz``; positions in
   the robot's base frame; ``q`` in mm, negative = pulled in.

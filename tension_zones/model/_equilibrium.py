@@ -60,7 +60,7 @@ wires' Hessian exact, the load's curvature learnt along the way (see :func:`_new
 backtracking line search over ten step sizes, the largest that satisfies Armijo's condition taken.
 ``max(s, 0)^2`` is only C1, so Newton is exact within a set of taut wires and the line search
 handles set changes; with friction, from the 8th iteration on, a step must lower ``|F|`` too (V's
-full steps can cycle between taut sets, model/README.md). The derivatives come from the implicit
+full steps can cycle between taut sets, docs/pages/model-reference.md). The derivatives come from the implicit
 function theorem on ``F(x*) = 0``
 (a custom JVP), never from the iterations. Per sample; ``vmap`` it.
 
@@ -235,7 +235,7 @@ def _relax(s0, k, G):
     compliance the wires share, module notes), by semismooth Newton from ``s0``: the equations are
     piecewise linear, so a few steps reach the root exactly (at most ``_RELAX_ITER``). Without
     compliance ``s0`` is the root and no step is taken (a ``while_loop`` that stops at a zero
-    residual; model/README.md has what the alternatives cost). The derivative is the root's implicit one (a custom JVP: forward and
+    residual; docs/pages/model-reference.md has the alternatives). The derivative is the root's implicit one (a custom JVP: forward and
     reverse mode, never through the iterations), ``-dG k max(s0, 0)`` at ``G = 0``, what the score
     test needs there."""
     tol = 1e-13 * (1.0 + jnp.max(jnp.abs(s0)))

@@ -36,7 +36,7 @@ class VariableCurvature(Effect):
     def pieces_for(self, model):
         # The tip error against the Kirchhoff rod (tests/reference_rod.py) of a bent 60 mm segment
         # falls as 1/m^2: under a lateral weight of 0.003 N/mm 0.040 / 0.018 mm with m = 4 / 6, with a
-        # 0.4 N lateral tip force as well 0.20 / 0.090 mm (model/README.md), against a tracker's
+        # 0.4 N lateral tip force as well 0.20 / 0.090 mm (docs/pages/model-reference.md), against a tracker's
         # 0.05 mm. On one or two segments 6 pieces make a rod fit's pass about 1.6x as long, which
         # such a calibration affords. Three segments keep 4: there the loop scores the rod every
         # round, and 6 pieces would take the calibration over its time budget
