@@ -102,7 +102,7 @@ class Fits:
         cut = rows[min(round((1.0 - LATER_SHARE) * len(rows)), len(rows) - 1)]
         self.w_early = (self.train & (np.arange(len(self.train)) < cut)).astype(float)
         self.late_idx = np.flatnonzero(self.held & (np.arange(len(self.held)) >= cut))
-        self.sigma = None
+        self.sigma: np.ndarray | None = None
 
     def fit(self, theta0, active, weights=None, max_iter: int = 40) -> np.ndarray:
         """The blocks ``active`` fitted from ``theta0`` (P,) on ``weights`` (default: the training part)."""

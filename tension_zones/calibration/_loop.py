@@ -63,6 +63,7 @@ import copy
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 
 import jax
 import numpy as np
@@ -272,35 +273,438 @@ def _flagged(structure: dict) -> bool:
     )
 
 
-def calibrate(
-    data: Dataset,
-    robot,
-    validate: Dataset | None = None,
-    model=None,
-    library=None,
-    nominal=None,
-    holdout: float = 0.25,
-    robust: bool = False,
-    alpha: float = 1e-3,
-    min_gain: float = 0.01,
-    min_excess: float = 0.25,
-    max_rounds: int | None = None,
-    log=None,
-    workers: int | None = None,
-    register: bool = True,
-) -> Result:
-    """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
+@dataclasses.dataclass(frozen=True)
+class _Loop:
+    """What the loop's steps share: the problem and its fits, the data's parts (boolean masks over the
+    problem's samples), the noise and the decisions' thresholds; ``say`` reports progress."""
 
-    ``validate``: a second recording of the same robot, only predicted after the selection.
-    ``library`` / ``nominal``: candidate and always-fitted effects (defaults by the data's frame,
-    :func:`.effects.library`). ``log`` (callable taking a str) reports progress. ``workers``: processes
-    that run the loop's independent fits alongside this one (:mod:`._fits`; None: one per spare core
-    where starting them is safe and the recording is large enough, ``TENSION_ZONES_WORKERS`` if set);
-    the result is the same with any. ``register``: move the recording into the robot's base frame
-    first (:mod:`._register`); False takes its frame as it is, for the frame parameters' local fits.
-    """
-    t0 = time.perf_counter()
-    say = log or (lambda s: None)
+    pb: Problem
+    model: RobotModel
+    fits: Fits
+    run: Runner
+    train: np.ndarray
+    held: np.ndarray
+    noise: dict
+    sigma: np.ndarray
+    held_feats: dict
+    cand_names: list
+    nominal_names: list
+    blocks: dict  # name -> effect, every block of the problem
+    alpha: float
+    min_gain: float
+    min_excess: float
+    max_rounds: int
+    robust: bool
+    say: Callable[[str], None]
+
+    sl: dict  # name -> the block's parameters in theta
+    m: int  # held-out samples
+    m_train: int
+
+    @property
+    def resolution(self) -> float:
+        # two held-out errors closer than this (their sum-of-squares difference, in ``unit_of``) are a
+        # tie: the test of one parameter cannot tell them apart
+        return chi2_quantile(self.alpha, 1)
+
+    def unit_of(self, e):
+        # held-out SSE changes are in units of the per-axis variance of the current residual (at
+        # least the noise): structure the model lacks must not make a chance improvement look significant
+        return max(float(np.mean(self.sigma**2)), e**2 / 3.0)
+
+    def one_round(self, st: _Branch, ties: list | None) -> bool:
+        """One round of the loop on branch ``st``: score, refit, keep the best, backward step.
+        Returns whether an effect was kept (the loop goes on). A near tie is recorded in ``ties``
+        (the look-ahead's start: the module's docstring, step 4)."""
+        st.rnd += 1
+        st.shortfall = None
+        scored = self.score(st)
+        if scored is None:
+            return False
+        scores, r, z_crit = scored
+        chosen = self.screen(st, scores, r, z_crit)[:TRIES_PER_ROUND]
+        tried = self.refit(st, chosen, r)
+        m, unit = self.m, self.unit_of(st.err)
+        good = sorted((t for t in tried if t["significant"]), key=lambda t: t["err"])
+        info = {
+            "round": st.rnd,
+            "z_critical": z_crit,
+            "rmse_held_out_mm": st.plain,
+            "rmse_train_mm": rmse(r[self.train]),
+        }
+        short = sorted((t for t in tried if t["short_of_share"]), key=lambda t: t["err"])
+        if not good and short:  # the joint look may go on from here (step 4)
+            st.shortfall = (copy.deepcopy(st), copy.deepcopy(tried), short[0]["name"], info)
+        if (
+            ties is not None
+            and len(good) > 1
+            and (good[1]["err"] ** 2 - good[0]["err"] ** 2) * m / unit < self.resolution
+        ):
+            # the test cannot tell the two apart: the look-ahead may go on from the runner-up
+            ties.append((copy.deepcopy(st), copy.deepcopy(tried), good[1]["name"], info))
+        return self.keep(st, tried, good[0] if good else None, info)
+
+    def score(self, st: _Branch) -> tuple | None:
+        """The score test of every candidate not in ``st``'s model on its held-out residual, recorded in
+        ``st.candidates`` (highest first). Returns the scores, the residual (every sample) and the
+        round's critical z-value, or None where no candidate is left to score."""
+        pb, sl, P, blocks, sigma = self.pb, self.sl, self.pb.null.size, self.blocks, self.sigma
+        rnd, theta, active = st.rnd, st.theta, st.active
+        remaining = [n for n in self.cand_names if n not in active]
+        # an effect with no sensitivity without a load is not scored while the model has none (its
+        # score would be 0; for the variable curvature this also spares the rod's program)
+        unloaded = not pb.loaded(theta, active)
+        idle = [n for n in remaining if getattr(blocks[n], "needs_load", False) and unloaded]
+        remaining = [n for n in remaining if n not in idle]
+        if not remaining:
+            return None
+        # effects that switch the solver are scored with their solver on (at null: the same model)
+        switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
+        # a memory's (the samples before) is scored in a program of its own: the rod's with it
+        # would solve every sample for every score, not only the held-out ones
+        recalled = [n for n in switched if getattr(blocks[n], "memory", False)]
+        switched = [n for n in switched if n not in recalled]
+        r = pb.residuals(theta, active)
+        if switched:
+            self.run.warmed("rod")  # a worker compiling the rod's program: load it rather than compile it
+        # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
+        r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(self.held))
+        for name in recalled:
+            J_held[..., sl[name]] = pb.jacobian(theta, active + [name], samples=np.flatnonzero(self.held))[1][
+                ..., sl[name]
+            ]
+        active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
+        wts = glitch_weights(r_held, sigma) if self.robust else None
+        # the score test's null is "what is left is noise"; far above the noise floor, what is left is
+        # mostly model error, and a candidate must explain more of it than its parameter count would by
+        # chance: the residual's own per-axis scale replaces the noise's there
+        kept_h = r_held if wts is None else r_held[wts > 0]
+        sigma_score = np.maximum(sigma, np.sqrt(np.mean(kept_h**2, axis=0)))
+        scores = []
+        for name in remaining:
+            s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
+            scores.append(
+                {
+                    "round": rnd,
+                    "name": name,
+                    "score": s["score"],
+                    "dof": s["dof"],
+                    "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0)),
+                }
+            )
+        scores.sort(key=lambda d: -d["score"])
+        scores += [
+            {
+                "round": rnd,
+                "name": n,
+                "score": 0.0,
+                "dof": int(sl[n].stop - sl[n].start),
+                "explained_rmse_mm": 0.0,
+                "not_scored": "the model has no load",
+            }
+            for n in idle
+        ]
+        st.candidates.extend(scores)
+        z_crit = _norm_isf(self.alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
+        self.say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
+        return scores, r, z_crit
+
+    def screen(self, st: _Branch, scores: list, r: np.ndarray, z_crit: float) -> list:
+        """The candidates of a round that go on to full refits, best first: the significant ones, or on
+        a second look every positive score; where many (or the rod's among several), only the best of
+        those whose short refit lowered the held-out error enough."""
+        pb, sl, m, alpha, theta, active, err = self.pb, self.sl, self.m, self.alpha, st.theta, st.active, st.err
+        significant = [s for s in scores if s["score"] > z_crit]
+        # the score test is first order: an effect whose parameters act nonlinearly once the others
+        # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
+        # critical 3.7, yet a short refit takes the held-out error to the noise floor) can explain
+        # far more than its score says. Where no score is significant but the held-out error is more
+        # than ``EXCESS_RATIO`` times the noise floor and its residual not noise (the final flag's
+        # test: structure along an input, an offset, or a clear excess), every candidate with a
+        # positive score gets a short refit, and the refits' tests below decide, with a larger share
+        # of the excess to explain (``SECOND_LOOK_SHARE``). Not only the best scores: an effect that
+        # the one before it has partly absorbed scores low (the hole clearance after friction: 1.96,
+        # eighth, and its refit took the held-out error from 7x the noise floor to the floor).
+        # (Closer to the floor, what is left is too little
+        # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
+        # structure that a geometry change took half of: the model's own discretisation.)
+        excess = _excess(st.plain, err, self.noise, m)
+        second_look = (
+            not significant
+            and excess["ratio_to_floor"] > EXCESS_RATIO
+            and _flagged({**structure_test(r[self.held], self.held_feats, self.sigma), "excess_over_noise": excess})
+        )
+        if second_look:
+            significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s]
+            for s in significant:
+                s["second_look"] = True
+        unit = self.unit_of(err)
+        if (
+            second_look
+            or len(significant) > TRIES_PER_ROUND
+            or (len(significant) > 1 and any(self.blocks[s["name"]].pieces_for(self.model) > 1 for s in significant))
+        ):
+            # screen: a short refit of every significant candidate, then the full refits of the best
+            # (also where fewer are significant but one of them is the rod's, whose full refit costs
+            # as much as several of the others')
+            jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in significant]
+            for s, e in zip(significant, self.run.map("screen", jobs)):
+                s["screened_rmse_mm"] = e
+            self.say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
+            # a candidate whose short refit does not lower the held-out error by a quarter of the drop
+            # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
+            # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
+            # refits (three of them the rod's, the costliest), each of which fails its test when run;
+            # every candidate screened out there has a higher held-out error after its short refit
+            # than without it
+            for s in significant:
+                s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
+                s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
+                s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
+            significant = sorted((s for s in significant if not s["screened_out"]), key=lambda s: s["screened_rmse_mm"])
+        return significant
+
+    def refit(self, st: _Branch, chosen: list, r: np.ndarray) -> list:
+        """The full refits of the ``chosen`` candidates on ``st``'s model and their tests (the module's
+        docstring, step 3). Returns a record of each, with its parameters and decision error."""
+        pb, sl, m, alpha, theta, active, err = self.pb, self.sl, self.m, self.alpha, st.theta, st.active, st.err
+        train, sigma, floor, unit = self.train, self.sigma, self.noise["floor_mm"], self.unit_of(err)
+        decision_error = self.fits.decision_error
+        tried = []
+        jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
+        # an effect of the clock must also predict the later samples from the earlier ones
+        timed = [i for i, s in enumerate(chosen) if getattr(self.blocks[s["name"]], "of_time", False)]
+        done = self.run.map("refit", jobs) + self.run.map("later", [(*jobs[i], theta, active) for i in timed])
+        later = dict(zip(timed, done[len(jobs) :]))
+        for i, (s, (th_new, plain_new, err_new, r_new)) in enumerate(zip(chosen, done)):
+            drop = (err**2 - err_new**2) * m / unit
+            need = chi2_quantile(alpha, max(s["dof"], 1))
+            # the training part's gain, tested the same way: not a share of the held-out gain, since the
+            # parts' mixes of motions differ (on FTDCR v4 the single-tendon pulls are a third of the
+            # training excess and a sixth of the held-out one, and no effect but the preload moves them)
+            tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
+            drop_train = (tr0**2 - tr1**2) * self.m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
+            share, share_train = _share(err, err_new, floor), _share(tr0, tr1, floor)
+            share_needed = 0.0 if st.relaxed else _share_needed(self.min_excess, err, floor)
+            tests = (
+                drop > need
+                and err_new < (1.0 - self.min_gain) * err
+                and drop_train > need
+                and (not s.get("second_look") or share >= SECOND_LOOK_SHARE)
+            )
+            extra = {}
+            if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
+                sse_with, sse_without, n_late = later[i]
+                extra = {"sse_drop_later": (sse_without - sse_with) / unit, "n_later": n_late}
+                tests = tests and extra["sse_drop_later"] > need
+            ok = tests and share >= share_needed
+            tried.append(
+                {
+                    "name": s["name"],
+                    "rmse_held_out_mm": plain_new,
+                    "rmse_train_mm": rmse(r_new[train]),
+                    "share_held_out": share,
+                    "share_needed": share_needed,
+                    "share_train": share_train,
+                    "sse_drop": drop,
+                    "sse_drop_train": drop_train,
+                    **extra,
+                    "needed": need,
+                    "significant": bool(ok),
+                    "short_of_share": bool(tests and not ok),
+                    "theta": th_new,
+                    "err": err_new,
+                    "score": s["score"],
+                }
+            )
+            self.say(
+                f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
+                f"{' significant' if ok else ' short of the share' if tests else ''}"
+            )
+        return tried
+
+    def keep(self, st: _Branch, tried: list, accepted: dict | None, info: dict) -> bool:
+        """Keep the refit ``accepted`` (one of ``tried``, or None) in ``st``, then the backward step;
+        record the round. Returns whether an effect was kept."""
+        removed = []
+        if accepted is not None:
+            st.theta, st.err, st.plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
+            st.active.append(accepted["name"])
+            st.effects.append(
+                {
+                    "name": accepted["name"],
+                    "rmse_after_mm": accepted["rmse_held_out_mm"],
+                    "score": accepted["score"],
+                }
+            )
+            self.say(f"  kept {accepted['name']}")
+            # backward step: an earlier effect that only stood in for the one just added goes
+            # (the refits without each earlier effect run at once; the first that passes is taken)
+            sl = self.sl
+            earlier = [e for e in st.effects if e["name"] != accepted["name"]]
+            jobs = [
+                (_reset(st.theta, sl[e["name"]], self.pb.null), [a for a in st.active if a != e["name"]])
+                for e in earlier
+            ]
+            for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, self.run.map("refit_held_only", jobs)):
+                rise = (err_wo**2 - st.err**2) * self.m / self.unit_of(st.err)
+                need = chi2_quantile(self.alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
+                self.say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
+                if rise < need:
+                    st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
+                    st.effects = [x for x in st.effects if x["name"] != e["name"]]
+                    removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise, "needed": need})
+                    self.say(f"  removed {e['name']}")
+                    break
+            st.models.append((list(st.active), st.theta.copy()))
+        name = None if accepted is None else accepted["name"]
+        tried = [
+            {**{k: v for k, v in t.items() if k not in ("theta", "err", "score")}, "accepted": t["name"] == name}
+            for t in tried
+        ]
+        st.rounds.append({**info, "tried": tried, "accepted": name, "removed": removed})
+        st.trail.append(st.err)
+        return accepted is not None
+
+    def select(self, st: _Branch, ties: list | None, ahead_of: list | None = None) -> _Branch:
+        """Rounds on ``st`` until one keeps nothing; with ``ahead_of`` (another branch's ``trail``),
+        only while ``st`` is not behind it after the same round (``st.behind`` then says where)."""
+        start = st.rnd
+        while st.rnd < self.max_rounds and self.one_round(st, ties):
+            if ahead_of and st.rnd > start and st.err > ahead_of[min(st.rnd, len(ahead_of)) - 1]:
+                st.behind = st.rnd
+                break
+        return st
+
+    def ending(self, st: _Branch) -> tuple:
+        """The held-out error of a branch's model and the structure left in its residual: the plain
+        RMSE, the decisions' error, the residual (every sample) and the structure test."""
+        plain_e, err_e, r_e = self.fits.held_error(st.theta, st.active)
+        structure = structure_test(r_e[self.held], self.held_feats, self.sigma)
+        structure["excess_over_noise"] = _excess(plain_e, err_e, self.noise, self.m)
+        return plain_e, err_e, r_e, structure
+
+    def look_ahead(self, st: _Branch, end: tuple, ties: list) -> tuple:
+        """The look-ahead (the module's docstring, step 4) from the first near tie in ``ties``: the
+        loop goes on from that round's runner-up too. Returns the branch kept and its ``ending``."""
+        # the loop ended with structure left, and a round had a near tie. Go
+        # on from its runner-up too, and keep that branch if it ends significantly lower. (The loop
+        # only adds and removes, it never swaps: a tip force taken for the weight in a tie under
+        # constant curvature leaves the rod nothing to explain, 1.10x the floor with structure left,
+        # where the weight's branch ends at 1.00x with the three effects the robot has.) The branch
+        # is given up as soon as it is behind after a round (on FTDCR v4 after its first: the
+        # weight's branch there ends 0.003 mm above the tip force's, and running it out costs rounds)
+        n_nominal, resolution = len(self.nominal_names), self.resolution
+        before, tried_t, runner, info = ties[0]
+        k = info["round"]
+        self.say(f"look-ahead: round {k} again, with {runner}")
+        first = next(t["name"] for t in st.rounds[k - 1]["tried"] if t["accepted"])
+        self.keep(before, tried_t, next(t for t in tried_t if t["name"] == runner), info)
+        alt = self.select(before, None, ahead_of=st.trail)
+        other = {"first": runner, "effects": alt.active[n_nominal:], "rmse_held_out_mm": alt.plain}
+        la = {
+            "branches": [
+                {
+                    "first": first,
+                    "effects": st.active[n_nominal:],
+                    "rmse_held_out_mm": end[0],
+                    "unexplained_structure": _flagged(end[3]),
+                },
+                other,
+            ],
+            "needed": resolution,
+            "kept": first,
+        }
+        if alt.behind:
+            other["behind_after_round"] = alt.behind
+            self.say(f"  {runner}: behind after round {alt.behind} ({alt.plain:.4f} mm held out): given up")
+        else:
+            end_alt = self.ending(alt)
+            other["unexplained_structure"] = _flagged(end_alt[3])
+            other["rmse_held_out_mm"] = end_alt[0]
+            la["sse_drop"] = (end[1] ** 2 - end_alt[1] ** 2) * self.m / self.unit_of(end[1])
+            if la["sse_drop"] > resolution:
+                st, end, la["kept"] = alt, end_alt, runner
+            self.say(
+                f"  {runner}: held-out {end_alt[0]:.4f} mm against {end[0]:.4f} mm (drop "
+                f"{la['sse_drop']:.1f}, needed {resolution:.1f}): kept the branch of {la['kept']}"
+            )
+        st.rounds[k - 1]["look_ahead"] = la
+        return st, end
+
+    def joint_look(self, st: _Branch, end: tuple) -> tuple:
+        """The joint look (the module's docstring, step 4): from the last round of ``st``, which kept
+        nothing though a refit passed every test but the share, go on with refits that need no share
+        of their own, and keep what that path adds only if it explains the share together, at least
+        ``min_excess`` of the excess (a significant drop for all its parameters too). Returns the
+        branch kept and its ``ending``."""
+        assert st.shortfall is not None
+        before, tried_j, first, info = st.shortfall
+        k = info["round"]
+        self.say(f"joint look: round {k} again, with {first}")
+        before.relaxed = True
+        self.keep(before, tried_j, next(t for t in tried_j if t["name"] == first), info)
+        alt = self.select(before, None)
+        end_alt = self.ending(alt)
+        added = [a for a in alt.active if a not in st.active]
+        dof = sum(int(self.sl[a].stop - self.sl[a].start) for a in added)
+        share = _share(end[1], end_alt[1], self.noise["floor_mm"])
+        drop = (end[1] ** 2 - end_alt[1] ** 2) * self.m / self.unit_of(end[1])
+        need = chi2_quantile(self.alpha, max(dof, 1))
+        share_needed = _share_needed(self.min_excess, end[1], self.noise["floor_mm"])  # as for one effect
+        ok = bool(added) and share >= share_needed and drop > need
+        jl = {
+            "first": first,
+            "effects": alt.active[len(self.nominal_names) :],
+            "added": added,
+            "removed": [a for a in st.active if a not in alt.active],
+            "rmse_held_out_mm": end_alt[0],
+            "rmse_before_mm": end[0],
+            "share_held_out": share,
+            "share_needed": share_needed,
+            "sse_drop": drop,
+            "needed": need,
+            "kept": ok,
+        }
+        self.say(
+            f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
+            f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * share_needed:.0f} %)"
+            f"{': kept' if ok else ''}"
+        )
+        if ok:
+            st, end = alt, end_alt
+        st.rounds[k - 1]["joint_look"] = jl
+        return st, end
+
+
+@dataclasses.dataclass(frozen=True)
+class _Prepared:
+    """The loop's problem before the first fit: the recording moved into the robot's base frame (where
+    the global registration applied), with the validation file's samples after the data file's."""
+
+    data: Dataset
+    full: Dataset
+    robot: Robot
+    model: RobotModel
+    pb: Problem
+    blocks: tuple  # nominal, then candidate effects
+    library: tuple
+    nominal_names: list
+    train: np.ndarray
+    held: np.ndarray
+    val: np.ndarray
+    n_fit: int  # the data file's samples
+    reg: GlobalRegistration | None
+    theta_decl: np.ndarray
+    noise: dict | None  # None where the data have no repeats: from the first fit's residual then
+    sigma: np.ndarray | None
+    n_workers: int
+    rod: list  # the candidates that need the rod's program
+
+
+def _prepare(data, robot, validate, model, library, nominal, holdout, register, workers, say) -> _Prepared:
+    """Check the recordings, split the data, register them (:mod:`._register`), build the problem and
+    estimate the noise (``calibrate``'s arguments)."""
     robot = Robot(robot) if isinstance(robot, Design) else robot
     data.check_against(robot)
     if validate is not None:
@@ -338,498 +742,216 @@ def calibrate(
     train = np.r_[train, np.zeros(full.n_samples - n_fit, bool)]
     held = np.r_[held, np.zeros(full.n_samples - n_fit, bool)]
     pb = Problem(model, robot, full, blocks, clock=clock)
-    cand_names = [b.name for b in library]
-    nominal_names = [b.name for b in nominal]
-    sl = pb.spec.slices()
-    P = pb.null.size
-
     theta_decl = pb.null.copy()
     try:
         noise = noise_floor(data)
     except ValueError:
         noise = None
     sigma = None if noise is None else np.asarray(noise["sigma_mm"])
+    rod = [b.name for b in library if b.pieces_for(model) > 1]
+    nominal_names = [b.name for b in nominal]
+    return _Prepared(
+        data=data, full=full, robot=robot, model=model, pb=pb, blocks=blocks, library=library,
+        nominal_names=nominal_names, train=train, held=held, val=val, n_fit=n_fit, reg=reg, theta_decl=theta_decl,
+        noise=noise, sigma=sigma, n_workers=n_workers, rod=rod,
+    )  # fmt: skip
 
-    fits = Fits(pb, train, held, robust)
+
+def _nominal_fit(pp: _Prepared, fits: Fits, run: Runner, say, **thresholds) -> tuple:
+    """The first fit (the nominal model) and the context of the loop's steps. Returns the context, the
+    loop's first branch and what the report needs of the start (declared and nominal errors, features)."""
+    pb, data, nominal_names, sigma, noise = pp.pb, pp.data, pp.nominal_names, pp.sigma, pp.noise
+    # without a worker, a spare core compiles on a thread what the loop will run: the rod's program
+    # where the first round scores it for sure (the model carries a load from the start: known tip
+    # forces, a declared weight), the final refit's once the first fit has fixed the fits' rows
+    if pp.rod and pb.loaded(pp.theta_decl, nominal_names):
+        run.ahead("rod")
+    active = list(nominal_names)
+    theta = fits.fit(_initial(pb, data, pp.theta_decl, nominal_names), active)
+    run.ahead("final")
+    theta_before = theta.copy()
+    r_decl = pb.residuals(pp.theta_decl, [])  # after the first fit: in its program (Problem._evaluate)
+    if noise is None:
+        noise = noise_floor(data, pb.residuals(theta, active)[: pp.n_fit])
+        sigma = np.asarray(noise["sigma_mm"])
+    assert sigma is not None  # (given with the noise: _prepare)
+    sigma = np.maximum(sigma, 1e-9)
     fits.sigma = sigma
-    fit, held_error, decision_error = fits.fit, fits.held_error, fits.decision_error
+    rmse_before, err, _ = fits.held_error(theta, active)
+    plain = rmse_before  # the current model's held-out RMSE (err: the one decisions use)
+    # the inputs the structure test looks along (from the nominal fit: the same for every model)
+    feats = features(pp.full, _base_frame_prediction(pb, theta_before, nominal_names))
+    say(
+        f"declared {rmse(r_decl[pp.held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
+        f"noise floor {noise['floor_mm']:.4f} mm"
+    )
+    main = _Branch(theta=theta, err=err, plain=plain, active=list(active), models=[(list(active), theta.copy())])
+    cand_names = [b.name for b in pp.library]
+    max_rounds = thresholds.pop("max_rounds")
+    cx = _Loop(
+        pb=pb,
+        model=pp.model,
+        fits=fits,
+        run=run,
+        train=pp.train,
+        held=pp.held,
+        noise=noise,
+        sigma=sigma,
+        held_feats={k: v[pp.held] for k, v in feats.items()},
+        cand_names=cand_names,
+        nominal_names=nominal_names,
+        blocks={b.name: b for b in pb.spec.blocks},
+        sl=pb.spec.slices(),
+        m=int(pp.held.sum()),
+        m_train=int(pp.train.sum()),
+        max_rounds=2 * len(cand_names) if max_rounds is None else max_rounds,  # add/remove cannot cycle
+        say=say,
+        **thresholds,
+    )
+    start = {"theta_before": theta_before, "r_decl": r_decl, "rmse_before": rmse_before, "features": feats}
+    return cx, main, start
+
+
+def _result(cx: _Loop, pp: _Prepared, start: dict, st: _Branch, end: tuple, holdout: float, t0: float) -> Result:
+    """The selection is over (branch ``st``, its ``ending``): refit the chosen model on every sample of
+    the data file (step 5), predict the validation file for every accepted model, and report."""
+    pb, run, say, train, held, val, full = cx.pb, cx.run, cx.say, pp.train, pp.held, pp.val, pp.full
+    theta, active, effects, models = st.theta, st.active, st.effects, st.models
+    # the selection is over: the structure left, on the held-out residual of the model fitted
+    # without those samples
+    plain_after, _, r_after, structure = end
+    # the final model: refitted on every sample of the data file (step 5 above); its effects'
+    # parameters (later effects refit earlier ones), deviations, identifiability
+    w_all = cx.fits.w_all
+    # (with the refits of the validation steps' models, below, at once)
+    jobs = [(theta, active, False)] + [(th, act, True) for act, th in models[:-1]] * bool(val.any())
+    run.warmed("final")
+    done = run.map("refit_all", jobs)
+    theta_sel, theta = theta, done[0][0]
+    r_final, J_final = pb.jacobian(theta, active)
+    free = pb.mask(active)
+    std = parameter_std(J_final, r_final, free, w_all)
+    for e in effects:
+        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
+        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
+    corr = correlations(J_final, free, w_all, pb.labels(active))
+    rmse_d = {
+        "declared": rmse(start["r_decl"][held]),
+        "before": start["rmse_before"],
+        "after": plain_after,
+        "train_after": rmse(r_after[train]),
+        "refit": rmse(r_final[train | held]),
+    }
+    steps = []
+    families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
+    for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
+        last = i == len(models) - 1  # the selected model: its residuals are r_after, its refit r_final
+        rr = r_after if last else pb.residuals(th, act)
+        # the validation file by the model refitted on every sample, as the final one (the last is it)
+        rv = rr if not val.any() else r_final if last else done[1 + i][1]
+        step = {
+            "effects": act[len(cx.nominal_names) :],
+            "rmse_held_out_mm": rmse(rr[held]),
+            "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
+            "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None,
+        }
+        if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
+            step["rmse_by_family_mm"] = {
+                part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
+                for part, mask, r in (("held_out", held, rr), ("validate", val, rv))
+                if mask.any()
+            }
+        steps.append(step)
+    bl = None
+    if val.any():
+        rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
+        bl = baselines(full, train, held, val)
+        say(f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)")
+    return Result(
+        problem=pb,
+        train=train,
+        held=held,
+        val=val,
+        holdout=pp.data.split_description(holdout),
+        noise=cx.noise,
+        theta_declared=pp.theta_decl,
+        theta_before=start["theta_before"],
+        theta_selected=theta_sel,
+        theta_after=theta,
+        std_after=std,
+        nominal=cx.nominal_names,
+        active=active,
+        effects=effects,
+        candidates=st.candidates,
+        rounds=st.rounds,
+        steps=steps,
+        structure=structure,
+        rmse=rmse_d,
+        # structure left, or the held-out error clearly above the noise floor (``ending``: ``_excess``)
+        unexplained_structure=_flagged(structure),
+        robust=cx.robust,
+        correlations=corr,
+        at_bound=pb.at_bounds(theta, active),
+        features=start["features"],
+        baselines=bl,
+        seconds=time.perf_counter() - t0,
+        registration=pp.reg,
+    )
+
+
+def calibrate(
+    data: Dataset,
+    robot,
+    validate: Dataset | None = None,
+    model=None,
+    library=None,
+    nominal=None,
+    holdout: float = 0.25,
+    robust: bool = False,
+    alpha: float = 1e-3,
+    min_gain: float = 0.01,
+    min_excess: float = 0.25,
+    max_rounds: int | None = None,
+    log=None,
+    workers: int | None = None,
+    register: bool = True,
+) -> Result:
+    """Run the loop on a recording of ``robot`` (a :class:`Robot`, or a :class:`Design` for one segment).
+
+    ``validate``: a second recording of the same robot, only predicted after the selection.
+    ``library`` / ``nominal``: candidate and always-fitted effects (defaults by the data's frame,
+    :func:`.effects.library`). ``log`` (callable taking a str) reports progress. ``workers``: processes
+    that run the loop's independent fits alongside this one (:mod:`._fits`; None: one per spare core
+    where starting them is safe and the recording is large enough, ``TENSION_ZONES_WORKERS`` if set);
+    the result is the same with any. ``register``: move the recording into the robot's base frame
+    first (:mod:`._register`); False takes its frame as it is, for the frame parameters' local fits.
+    """
+    t0 = time.perf_counter()
+    say = log or (lambda s: None)
+    pp = _prepare(data, robot, validate, model, library, nominal, holdout, register, workers, say)
+    fits = Fits(pp.pb, pp.train, pp.held, robust)
+    fits.sigma = pp.sigma
     # the workers compile the rod's program first (the main process needs it last), then the model's,
     # then the final refit's
-    rod = [b.name for b in library if b.pieces_for(model) > 1]
-    warm = {"rod": (nominal_names + rod[:1], "train")} if rod else {}
-    warm.update(model=(nominal_names, "train"), final=(nominal_names, "all"))
-    with Runner(fits, n_workers, (model, robot, full, blocks, pb.clock), warm) as run:
-        # without a worker, a spare core compiles on a thread what the loop will run: the rod's program
-        # where the first round scores it for sure (the model carries a load from the start: known tip
-        # forces, a declared weight), the final refit's once the first fit has fixed the fits' rows
-        if rod and pb.loaded(theta_decl, nominal_names):
-            run.ahead("rod")
-        active = list(nominal_names)
-        theta = fit(_initial(pb, data, theta_decl, nominal_names), active)
-        run.ahead("final")
-        theta_before = theta.copy()
-        r_decl = pb.residuals(theta_decl, [])  # after the first fit: in its program (Problem._evaluate)
-        if noise is None:
-            noise = noise_floor(data, pb.residuals(theta, active)[:n_fit])
-            sigma = np.asarray(noise["sigma_mm"])
-        sigma = np.maximum(sigma, 1e-9)
-        fits.sigma = sigma
-        rmse_before, err, _ = held_error(theta, active)
-        plain = rmse_before  # the current model's held-out RMSE (err: the one decisions use)
-        m, m_train = int(held.sum()), int(train.sum())
-        # the inputs the structure test looks along (from the nominal fit: the same for every model)
-        feats = features(full, _base_frame_prediction(pb, theta_before, nominal_names))
-        held_feats = {k: v[held] for k, v in feats.items()}
-        say(
-            f"declared {rmse(r_decl[held]):.4f} mm, nominal fit {rmse_before:.4f} mm, "
-            f"noise floor {noise['floor_mm']:.4f} mm"
-        )
-        main = _Branch(theta=theta, err=err, plain=plain, active=list(active), models=[(list(active), theta.copy())])
-        max_rounds = 2 * len(cand_names) if max_rounds is None else max_rounds  # add/remove cannot cycle
-        blocks = {b.name: b for b in pb.spec.blocks}
-        # two held-out errors closer than this (their sum-of-squares difference, in ``unit_of``) are a
-        # tie: the test of one parameter cannot tell them apart
-        resolution = chi2_quantile(alpha, 1)
-
-        def unit_of(e):
-            # held-out SSE changes are in units of the per-axis variance of the current residual (at
-            # least the noise): structure the model lacks must not make a chance improvement look significant
-            return max(float(np.mean(sigma**2)), e**2 / 3.0)
-
-        def one_round(st: _Branch, ties: list | None) -> bool:
-            """One round of the loop on branch ``st``: score, refit, keep the best, backward step.
-            Returns whether an effect was kept (the loop goes on). A near tie is recorded in ``ties``
-            (the look-ahead's start: the module's docstring, step 4)."""
-            st.rnd += 1
-            st.shortfall = None
-            rnd, theta, active, err, plain = st.rnd, st.theta, st.active, st.err, st.plain
-            remaining = [n for n in cand_names if n not in active]
-            # an effect with no sensitivity without a load is not scored while the model has none (its
-            # score would be 0; for the variable curvature this also spares the rod's program)
-            unloaded = not pb.loaded(theta, active)
-            idle = [n for n in remaining if getattr(blocks[n], "needs_load", False) and unloaded]
-            remaining = [n for n in remaining if n not in idle]
-            if not remaining:
-                return False
-            # effects that switch the solver are scored with their solver on (at null: the same model)
-            switched = [n for n in remaining if getattr(blocks[n], "scored_on", False)]
-            # a memory's (the samples before) is scored in a program of its own: the rod's with it
-            # would solve every sample for every score, not only the held-out ones
-            recalled = [n for n in switched if getattr(blocks[n], "memory", False)]
-            switched = [n for n in switched if n not in recalled]
-            r = pb.residuals(theta, active)
-            if switched:
-                run.warmed("rod")  # a worker compiling the rod's program: load it rather than compile it
-            # the score test needs the held-out samples only (the rod's Jacobian costs ~7x the model's)
-            r_held, J_held = pb.jacobian(theta, active + switched, samples=np.flatnonzero(held))
-            for name in recalled:
-                J_held[..., sl[name]] = pb.jacobian(theta, active + [name], samples=np.flatnonzero(held))[1][
-                    ..., sl[name]
-                ]
-            active_cols = np.concatenate([np.arange(P)[sl[n]] for n in active])
-            wts = glitch_weights(r_held, sigma) if robust else None
-            # the score test's null is "what is left is noise"; far above the noise floor, what is left is
-            # mostly model error, and a candidate must explain more of it than its parameter count would by
-            # chance: the residual's own per-axis scale replaces the noise's there
-            kept_h = r_held if wts is None else r_held[wts > 0]
-            sigma_score = np.maximum(sigma, np.sqrt(np.mean(kept_h**2, axis=0)))
-            scores = []
-            for name in remaining:
-                s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
-                scores.append(
-                    {
-                        "round": rnd,
-                        "name": name,
-                        "score": s["score"],
-                        "dof": s["dof"],
-                        "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0)),
-                    }
-                )
-            scores.sort(key=lambda d: -d["score"])
-            scores += [
-                {
-                    "round": rnd,
-                    "name": n,
-                    "score": 0.0,
-                    "dof": int(sl[n].stop - sl[n].start),
-                    "explained_rmse_mm": 0.0,
-                    "not_scored": "the model has no load",
-                }
-                for n in idle
-            ]
-            st.candidates.extend(scores)
-            z_crit = _norm_isf(alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
-            say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
-            tried = []
-            plain_start = plain
-            significant = [s for s in scores if s["score"] > z_crit]
-            # the score test is first order: an effect whose parameters act nonlinearly once the others
-            # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
-            # critical 3.7, yet a short refit takes the held-out error to the noise floor) can explain
-            # far more than its score says. Where no score is significant but the held-out error is more
-            # than ``EXCESS_RATIO`` times the noise floor and its residual not noise (the final flag's
-            # test: structure along an input, an offset, or a clear excess), every candidate with a
-            # positive score gets a short refit, and the refits' tests below decide, with a larger share
-            # of the excess to explain (``SECOND_LOOK_SHARE``). Not only the best scores: an effect that
-            # the one before it has partly absorbed scores low (the hole clearance after friction: 1.96,
-            # eighth, and its refit took the held-out error from 7x the noise floor to the floor).
-            # (Closer to the floor, what is left is too little
-            # to name: a rod of four pieces fitted to a generator's of six, at 1.05x the floor, left
-            # structure that a geometry change took half of: the model's own discretisation.)
-            excess = _excess(plain, err, noise, m)
-            second_look = (
-                not significant
-                and excess["ratio_to_floor"] > EXCESS_RATIO
-                and _flagged({**structure_test(r[held], held_feats, sigma), "excess_over_noise": excess})
-            )
-            if second_look:
-                significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s]
-                for s in significant:
-                    s["second_look"] = True
-            unit = unit_of(err)
-            if (
-                second_look
-                or len(significant) > TRIES_PER_ROUND
-                or (len(significant) > 1 and any(blocks[s["name"]].pieces_for(model) > 1 for s in significant))
-            ):
-                # screen: a short refit of every significant candidate, then the full refits of the best
-                # (also where fewer are significant but one of them is the rod's, whose full refit costs
-                # as much as several of the others')
-                jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in significant]
-                for s, e in zip(significant, run.map("screen", jobs)):
-                    s["screened_rmse_mm"] = e
-                say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
-                # a candidate whose short refit does not lower the held-out error by a quarter of the drop
-                # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
-                # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
-                # refits (three of them the rod's, the costliest), each of which fails its test when run;
-                # every candidate screened out there has a higher held-out error after its short refit
-                # than without it
-                for s in significant:
-                    s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
-                    s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
-                    s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
-                significant = sorted(
-                    (s for s in significant if not s["screened_out"]), key=lambda s: s["screened_rmse_mm"]
-                )
-            chosen = significant[:TRIES_PER_ROUND]
-            jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
-            # an effect of the clock must also predict the later samples from the earlier ones
-            timed = [i for i, s in enumerate(chosen) if getattr(blocks[s["name"]], "of_time", False)]
-            done = run.map("refit", jobs) + run.map("later", [(*jobs[i], theta, active) for i in timed])
-            later = dict(zip(timed, done[len(jobs) :]))
-            for i, (s, (th_new, plain_new, err_new, r_new)) in enumerate(zip(chosen, done)):
-                drop = (err**2 - err_new**2) * m / unit
-                need = chi2_quantile(alpha, max(s["dof"], 1))
-                # the training part's gain, tested the same way: not a share of the held-out gain, since the
-                # parts' mixes of motions differ (on FTDCR v4 the single-tendon pulls are a third of the
-                # training excess and a sixth of the held-out one, and no effect but the preload moves them)
-                tr0, tr1 = decision_error(r, train), decision_error(r_new, train)
-                drop_train = (tr0**2 - tr1**2) * m_train / max(float(np.mean(sigma**2)), tr0**2 / 3.0)
-                share, share_train = _share(err, err_new, noise["floor_mm"]), _share(tr0, tr1, noise["floor_mm"])
-                share_needed = 0.0 if st.relaxed else _share_needed(min_excess, err, noise["floor_mm"])
-                tests = (
-                    drop > need
-                    and err_new < (1.0 - min_gain) * err
-                    and drop_train > need
-                    and (not s.get("second_look") or share >= SECOND_LOOK_SHARE)
-                )
-                extra = {}
-                if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
-                    sse_with, sse_without, n_late = later[i]
-                    extra = {"sse_drop_later": (sse_without - sse_with) / unit, "n_later": n_late}
-                    tests = tests and extra["sse_drop_later"] > need
-                ok = tests and share >= share_needed
-                tried.append(
-                    {
-                        "name": s["name"],
-                        "rmse_held_out_mm": plain_new,
-                        "rmse_train_mm": rmse(r_new[train]),
-                        "share_held_out": share,
-                        "share_needed": share_needed,
-                        "share_train": share_train,
-                        "sse_drop": drop,
-                        "sse_drop_train": drop_train,
-                        **extra,
-                        "needed": need,
-                        "significant": bool(ok),
-                        "short_of_share": bool(tests and not ok),
-                        "theta": th_new,
-                        "err": err_new,
-                        "score": s["score"],
-                    }
-                )
-                say(
-                    f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
-                    f"{' significant' if ok else ' short of the share' if tests else ''}"
-                )
-            good = sorted((t for t in tried if t["significant"]), key=lambda t: t["err"])
-            info = {
-                "round": rnd,
-                "z_critical": z_crit,
-                "rmse_held_out_mm": plain_start,
-                "rmse_train_mm": rmse(r[train]),
-            }
-            short = sorted((t for t in tried if t["short_of_share"]), key=lambda t: t["err"])
-            if not good and short:  # the joint look may go on from here (step 4)
-                st.shortfall = (copy.deepcopy(st), copy.deepcopy(tried), short[0]["name"], info)
-            if (
-                ties is not None
-                and len(good) > 1
-                and (good[1]["err"] ** 2 - good[0]["err"] ** 2) * m / unit < resolution
-            ):
-                # the test cannot tell the two apart: the look-ahead may go on from the runner-up
-                ties.append((copy.deepcopy(st), copy.deepcopy(tried), good[1]["name"], info))
-            return keep(st, tried, good[0] if good else None, info)
-
-        def keep(st: _Branch, tried: list, accepted: dict | None, info: dict) -> bool:
-            """Keep the refit ``accepted`` (one of ``tried``, or None) in ``st``, then the backward step;
-            record the round. Returns whether an effect was kept."""
-            removed = []
-            if accepted is not None:
-                st.theta, st.err, st.plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
-                st.active.append(accepted["name"])
-                st.effects.append(
-                    {
-                        "name": accepted["name"],
-                        "rmse_after_mm": accepted["rmse_held_out_mm"],
-                        "score": accepted["score"],
-                    }
-                )
-                say(f"  kept {accepted['name']}")
-                # backward step: an earlier effect that only stood in for the one just added goes
-                # (the refits without each earlier effect run at once; the first that passes is taken)
-                earlier = [e for e in st.effects if e["name"] != accepted["name"]]
-                jobs = [
-                    (_reset(st.theta, sl[e["name"]], pb.null), [a for a in st.active if a != e["name"]])
-                    for e in earlier
-                ]
-                for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, run.map("refit_held_only", jobs)):
-                    rise = (err_wo**2 - st.err**2) * m / unit_of(st.err)
-                    need = chi2_quantile(alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
-                    say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
-                    if rise < need:
-                        st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
-                        st.effects = [x for x in st.effects if x["name"] != e["name"]]
-                        removed.append(
-                            {"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise, "needed": need}
-                        )
-                        say(f"  removed {e['name']}")
-                        break
-                st.models.append((list(st.active), st.theta.copy()))
-            name = None if accepted is None else accepted["name"]
-            tried = [
-                {**{k: v for k, v in t.items() if k not in ("theta", "err", "score")}, "accepted": t["name"] == name}
-                for t in tried
-            ]
-            st.rounds.append({**info, "tried": tried, "accepted": name, "removed": removed})
-            st.trail.append(st.err)
-            return accepted is not None
-
-        def select(st: _Branch, ties: list | None, ahead_of: list | None = None) -> _Branch:
-            """Rounds on ``st`` until one keeps nothing; with ``ahead_of`` (another branch's ``trail``),
-            only while ``st`` is not behind it after the same round (``st.behind`` then says where)."""
-            start = st.rnd
-            while st.rnd < max_rounds and one_round(st, ties):
-                if ahead_of and st.rnd > start and st.err > ahead_of[min(st.rnd, len(ahead_of)) - 1]:
-                    st.behind = st.rnd
-                    break
-            return st
-
-        def ending(st: _Branch):
-            """The held-out error of a branch's model and the structure left in its residual."""
-            plain_e, err_e, r_e = held_error(st.theta, st.active)
-            structure = structure_test(r_e[held], held_feats, sigma)
-            structure["excess_over_noise"] = _excess(plain_e, err_e, noise, m)
-            return plain_e, err_e, r_e, structure
-
-        def joint_look(st: _Branch, end) -> tuple:
-            """The joint look (the module's docstring, step 4): from the last round of ``st``, which kept
-            nothing though a refit passed every test but the share, go on with refits that need no share
-            of their own, and keep what that path adds only if it explains the share together, at least
-            ``min_excess`` of the excess (a significant drop for all its parameters too). Returns the
-            branch kept and its ``ending``."""
-            before, tried_j, first, info = st.shortfall
-            k = info["round"]
-            say(f"joint look: round {k} again, with {first}")
-            before.relaxed = True
-            keep(before, tried_j, next(t for t in tried_j if t["name"] == first), info)
-            alt = select(before, None)
-            end_alt = ending(alt)
-            added = [a for a in alt.active if a not in st.active]
-            dof = sum(int(sl[a].stop - sl[a].start) for a in added)
-            share = _share(end[1], end_alt[1], noise["floor_mm"])
-            drop = (end[1] ** 2 - end_alt[1] ** 2) * m / unit_of(end[1])
-            need = chi2_quantile(alpha, max(dof, 1))
-            share_needed = _share_needed(min_excess, end[1], noise["floor_mm"])  # as for one effect
-            ok = bool(added) and share >= share_needed and drop > need
-            jl = {
-                "first": first,
-                "effects": alt.active[len(nominal_names) :],
-                "added": added,
-                "removed": [a for a in st.active if a not in alt.active],
-                "rmse_held_out_mm": end_alt[0],
-                "rmse_before_mm": end[0],
-                "share_held_out": share,
-                "share_needed": share_needed,
-                "sse_drop": drop,
-                "needed": need,
-                "kept": ok,
-            }
-            say(
-                f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
-                f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * share_needed:.0f} %)"
-                f"{': kept' if ok else ''}"
-            )
-            if ok:
-                st, end = alt, end_alt
-            st.rounds[k - 1]["joint_look"] = jl
-            return st, end
-
-        ties = []
-        st = select(main, ties)
-        end = ending(st)
-        if ties and _flagged(end[3]):
-            # the look-ahead (step 4): the loop ended with structure left, and a round had a near tie. Go
-            # on from its runner-up too, and keep that branch if it ends significantly lower. (The loop
-            # only adds and removes, it never swaps: a tip force taken for the weight in a tie under
-            # constant curvature leaves the rod nothing to explain, 1.10x the floor with structure left,
-            # where the weight's branch ends at 1.00x with the three effects the robot has.) The branch
-            # is given up as soon as it is behind after a round (on FTDCR v4 after its first: the
-            # weight's branch there ends 0.003 mm above the tip force's, and running it out costs rounds)
-            before, tried_t, runner, info = ties[0]
-            k = info["round"]
-            say(f"look-ahead: round {k} again, with {runner}")
-            first = next(t["name"] for t in st.rounds[k - 1]["tried"] if t["accepted"])
-            keep(before, tried_t, next(t for t in tried_t if t["name"] == runner), info)
-            alt = select(before, None, ahead_of=st.trail)
-            other = {"first": runner, "effects": alt.active[len(nominal_names) :], "rmse_held_out_mm": alt.plain}
-            la = {
-                "branches": [
-                    {
-                        "first": first,
-                        "effects": st.active[len(nominal_names) :],
-                        "rmse_held_out_mm": end[0],
-                        "unexplained_structure": _flagged(end[3]),
-                    },
-                    other,
-                ],
-                "needed": resolution,
-                "kept": first,
-            }
-            if alt.behind:
-                other["behind_after_round"] = alt.behind
-                say(f"  {runner}: behind after round {alt.behind} ({alt.plain:.4f} mm held out): given up")
-            else:
-                end_alt = ending(alt)
-                other["unexplained_structure"] = _flagged(end_alt[3])
-                other["rmse_held_out_mm"] = end_alt[0]
-                la["sse_drop"] = (end[1] ** 2 - end_alt[1] ** 2) * m / unit_of(end[1])
-                if la["sse_drop"] > resolution:
-                    st, end, la["kept"] = alt, end_alt, runner
-                say(
-                    f"  {runner}: held-out {end_alt[0]:.4f} mm against {end[0]:.4f} mm (drop "
-                    f"{la['sse_drop']:.1f}, needed {resolution:.1f}): kept the branch of {la['kept']}"
-                )
-            st.rounds[k - 1]["look_ahead"] = la
+    warm = {"rod": (pp.nominal_names + pp.rod[:1], "train")} if pp.rod else {}
+    warm.update(model=(pp.nominal_names, "train"), final=(pp.nominal_names, "all"))
+    with Runner(fits, pp.n_workers, (pp.model, pp.robot, pp.full, pp.blocks, pp.pb.clock), warm) as run:
+        cx, main, start = _nominal_fit(
+            pp, fits, run, say, alpha=alpha, min_gain=min_gain, min_excess=min_excess, max_rounds=max_rounds,
+            robust=robust,
+        )  # fmt: skip
+        ties: list = []
+        st = cx.select(main, ties)
+        end = cx.ending(st)
+        if ties and _flagged(end[3]):  # the look-ahead (step 4)
+            st, end = cx.look_ahead(st, end, ties)
         if (
             st.shortfall is not None
             and _flagged(end[3])
             and end[3]["excess_over_noise"]["ratio_to_floor"] > EXCESS_SCALE
         ):
-            st, end = joint_look(st, end)
-        theta, active, effects, candidates, rounds, models = (
-            st.theta,
-            st.active,
-            st.effects,
-            st.candidates,
-            st.rounds,
-            st.models,
-        )
-
-        # the selection is over: the structure left, on the held-out residual of the model fitted
-        # without those samples
-        plain_after, _, r_after, structure = end
-        # the final model: refitted on every sample of the data file (step 5 above); its effects'
-        # parameters (later effects refit earlier ones), deviations, identifiability
-        w_all = fits.w_all
-        # (with the refits of the validation steps' models, below, at once)
-        jobs = [(theta, active, False)] + [(th, act, True) for act, th in models[:-1]] * bool(val.any())
-        run.warmed("final")
-        done = run.map("refit_all", jobs)
-        theta_sel, theta = theta, done[0][0]
-        r_final, J_final = pb.jacobian(theta, active)
-        free = pb.mask(active)
-        std = parameter_std(J_final, r_final, free, w_all)
-        for e in effects:
-            e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
-            e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
-        corr = correlations(J_final, free, w_all, pb.labels(active))
-        # structure left, or the held-out error clearly above the noise floor (``ending``: ``_excess``)
-        unexplained = _flagged(structure)
-        rmse_d = {
-            "declared": rmse(r_decl[held]),
-            "before": rmse_before,
-            "after": plain_after,
-            "train_after": rmse(r_after[train]),
-            "refit": rmse(r_final[train | held]),
-        }
-        steps = []
-        families = None if full.groups is None else np.array([pattern_family(g) for g in full.groups])
-        for i, (act, th) in enumerate(models):  # the validation file, predicted only now, for every accepted model
-            last = i == len(models) - 1  # the selected model: its residuals are r_after, its refit r_final
-            rr = r_after if last else pb.residuals(th, act)
-            # the validation file by the model refitted on every sample, as the final one (the last is it)
-            rv = rr if not val.any() else r_final if last else done[1 + i][1]
-            step = {
-                "effects": act[len(nominal_names) :],
-                "rmse_held_out_mm": rmse(rr[held]),
-                "rmse_validate_mm": rmse(rv[val]) if val.any() else None,
-                "rmse_validate_aligned_mm": rmse_aligned(rv[val]) if val.any() else None,
-            }
-            if families is not None:  # per pattern family (same direction, S-curve, spiral, ...)
-                step["rmse_by_family_mm"] = {
-                    part: {f: rmse(r[mask & (families == f)]) for f in dict.fromkeys(families[mask])}
-                    for part, mask, r in (("held_out", held, rr), ("validate", val, rv))
-                    if mask.any()
-                }
-            steps.append(step)
-        bl = None
-        if val.any():
-            rmse_d["validate"], rmse_d["validate_aligned"] = rmse(r_final[val]), rmse_aligned(r_final[val])
-            bl = baselines(full, train, held, val)
-            say(
-                f"validation RMSE {rmse_d['validate']:.3f} mm (mean offset removed {rmse_d['validate_aligned']:.3f} mm)"
-            )
-        return Result(
-            problem=pb,
-            train=train,
-            held=held,
-            val=val,
-            holdout=data.split_description(holdout),
-            noise=noise,
-            theta_declared=theta_decl,
-            theta_before=theta_before,
-            theta_selected=theta_sel,
-            theta_after=theta,
-            std_after=std,
-            nominal=nominal_names,
-            active=active,
-            effects=effects,
-            candidates=candidates,
-            rounds=rounds,
-            steps=steps,
-            structure=structure,
-            rmse=rmse_d,
-            unexplained_structure=unexplained,
-            robust=robust,
-            correlations=corr,
-            at_bound=pb.at_bounds(theta, active),
-            features=feats,
-            baselines=bl,
-            seconds=time.perf_counter() - t0,
-            registration=reg,
-        )
+            st, end = cx.joint_look(st, end)  # the joint look (step 4)
+        return _result(cx, pp, start, st, end, holdout, t0)
 
 
 def _share_needed(min_excess: float, err: float, floor: float) -> float:
