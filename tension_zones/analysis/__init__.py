@@ -1,6 +1,7 @@
-"""Analysis: single-pose performance measures and the sweep engine that evaluates them over grids."""
+"""Analysis: single-pose (one segment) and single-configuration (a robot) performance measures and the sweep engine that evaluates them over grids."""
 
 from .. import _config  # noqa: F401  (float64 before any array is made)
+from ._chain import config_measures, config_metrics, zonotope_max_sq
 from ._metrics import DEFAULT_DQ, MEASURES, pose_measures, pose_metrics, zonogon_vertices
 from ._sweep import (
     REDUCTIONS,
@@ -16,6 +17,8 @@ __all__ = [
     "MEASURES",
     "REDUCTIONS",
     "compiled_chunk_count",
+    "config_measures",
+    "config_metrics",
     "grid_deg",
     "pose_measures",
     "pose_metrics",
@@ -23,4 +26,5 @@ __all__ = [
     "sweep_grid",
     "sweep_poses",
     "zonogon_vertices",
+    "zonotope_max_sq",
 ]

@@ -1,0 +1,192 @@
+"""Single-configuration measures of a robot of any number of segments (tension_zones/MODEL.md Sec. 3, chained).
+
+The measures of :mod:`._metrics` for a :class:`~tension_zones.model.Robot`: at a configuration ``B``
+(S, 2) the wire-to-tip Jacobian is ``J_xq = J_xB pinv(J~_qB)`` (6, N), ``J~_qB`` the rows of the
+wires kept (all: traditional, push-pull; the taut ones: reduced). A distal wire crosses the proximal
+segments, so its row acts on each of them, and it is taut by the chained tension-zone rule of
+:meth:`Robot.tension_score` (each segment bending further in its own plane).
+
+With two or more segments ``J_v`` and ``J_w`` (3 x N) have rank up to 3 (``min(3, 2S)``): ``KCI`` and
+``sigma_min`` use the ``min(3, 2S)``-th singular value, which for one segment is the paper's
+``sigma_2``. The uncertainty box ``dq [-1, 1]^N`` maps to the zonotope ``J_v dq [-1, 1]^N`` in
+space, whose largest norm is at a vertex; :func:`zonotope_max_sq` lists a superset of its vertices,
+each a point of the zonotope, so the maximum is exact (no sampling, no ``2^N`` enumeration).
+
+**Coordinates.** The chain's configuration coordinates are the bending vectors ``B``: regular at the
+straight pose and the same in every bending direction. Where the taut wires' rows have full rank
+(``2S``) the measures do not depend on that choice; where fewer act (one taut wire of a segment), the
+pseudo-inverse's minimum-norm step does. A one-segment robot is therefore the segment's own code path
+(:func:`~._metrics.pose_measures`, the paper's ``(theta_L, delta)``), so its numbers are exactly a
+:class:`~tension_zones.model.Design`'s; ``general=True`` takes the chain formulas instead.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._numerics import eps_of
+from ..model._kinematics import b_to_psi
+from ..model._robot import Robot
+from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
+
+
+def zonotope_max_sq(G):
+    """``max |G s|^2`` over ``s in [-1, 1]^N`` for generators ``G`` (3, N): the squared largest norm of
+    the zonotope ``G [-1, 1]^N``, exactly.
+
+    A norm is convex, so its maximum is at a vertex, and every vertex is an end of an edge on a face.
+    For each pair ``i < j`` of generators, with the face normal ``w = g_i x g_j`` and the in-face
+    direction ``t = w x g_i``, the candidates take the signs of ``g_k . (w + e s t + e^2 r g_i)`` for a
+    small ``e`` and ``s, r = +-1`` (ties, within ``PARALLEL_TOL`` eps, go to the next term): the ends
+    of the face's edges parallel to ``g_i``, on both sides. A face's edges along all but one of its
+    directions reach all its vertices, so ``i < j`` suffices (``i = j`` adds the ends of a zonotope
+    of one direction, a single taut wire); every candidate is a point of the
+    zonotope, so none can exceed the maximum. This holds for a flat zonotope or a segment (a straight
+    robot, one segment: every ``w`` is normal to the plane and the in-face terms decide) and for
+    parallel or zero generators.
+
+    Written elementwise over the pairs (no batched matrix products), so that vmapped it fuses.
+    """
+    iu, ju = np.triu_indices(G.shape[1])  # i == j: w = t = 0, the extremes along g_i (a zonotope of one direction)
+    tol = PARALLEL_TOL * eps_of(G)
+    g = [G[c] for c in range(3)]  # (N,) each
+    gi, gj = [x[iu] for x in g], [x[ju] for x in g]  # (P,) each
+    w = _cross(gi, gj)
+    t = _cross(w, gi)
+
+    def dots(v):  # (P, N): v_p . g_k
+        return sum(v[c][:, None] * g[c][None, :] for c in range(3))
+
+    def norm(v):
+        return jnp.sqrt(jax.lax.stop_gradient(sum(x * x for x in v)))
+
+    ng = norm(g)[None, :]
+    dw, dt, de = dots(w), dots(t), dots(gi)
+    tie_w = jnp.abs(dw) <= tol * norm(w)[:, None] * ng
+    tie_t = tie_w & (jnp.abs(dt) <= tol * norm(t)[:, None] * ng)
+    signs = [  # the three terms' signs, each where the earlier ones tie (stop_gradient: piecewise constant)
+        jax.lax.stop_gradient(jnp.where(tie_w, 0.0, jnp.sign(dw))),
+        jax.lax.stop_gradient(jnp.where(tie_w & ~tie_t, jnp.sign(dt), 0.0)),
+        jax.lax.stop_gradient(jnp.where(tie_t, jnp.sign(de), 0.0)),
+    ]
+    X = [[jnp.sum(s * g[c][None, :], axis=1) for c in range(3)] for s in signs]  # (P,) each
+    best = []
+    for side in (1.0, -1.0):
+        for end in (1.0, -1.0):
+            x = [X[0][c] + side * X[1][c] + end * X[2][c] for c in range(3)]
+            best.append(jnp.max(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]))
+    return functools.reduce(jnp.maximum, best)
+
+
+def _cross(a, b):
+    """Cross product of 3-vectors given by their components (lists of arrays)."""
+    return [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+
+
+def _rank_cap(robot: Robot) -> int:
+    """The rank ``J_v`` and ``J_w`` can reach: ``min(3, 2S)``."""
+    return min(3, 2 * robot.n_segments)
+
+
+def _singular(J, r: int, n_wires: int):
+    """``(sigma_1, sigma_r, sigma_min_nz)`` of a (3, N) block: the largest, the ``r``-th and the smallest
+    non-zero singular value among the first ``r`` (NumPy's rank rule ``max(3, N) eps sigma_1``).
+    Singular values only (no vectors): the gradient is finite where two of them meet."""
+    s = jnp.linalg.svd(J, compute_uv=False)
+    s1 = s[0]
+    rtol = max(3, n_wires) * eps_of(J)
+    head = s[:r]
+    nz = jnp.min(jnp.where(head > rtol * s1, head, jnp.inf))
+    return s1, head[-1], jnp.where(jnp.isfinite(nz), nz, s1)
+
+
+def chain_J_xq(robot: Robot, B, mask=None):
+    """``J_xB pinv(J~_qB)`` (6, N) at ``B`` (S, 2): all wires (``mask=None``) or the ``mask`` (N,)'s rows;
+    slack wires' columns are exactly zero. NaN in ``B`` or the mask gives NaN."""
+    return robot.J_xq(B, mask)
+
+
+def _chain_measures(robot: Robot, B, dq, mask):
+    """Every measure of :func:`config_measures` by the general chain formulas (any ``S``)."""
+    J = chain_J_xq(robot, B, mask)
+    dq = jnp.asarray(dq, J.dtype)
+    r = _rank_cap(robot)
+    out = {}
+    for part, block in (("v", J[:3]), ("w", J[3:])):
+        s1, sr, snz = _singular(block, r, robot.n_wires)
+        out[f"kci_{part}"] = _div0(sr, s1)
+        out[f"sigma_min_{part}"] = sr
+        out[f"sigma_min_nz_{part}"] = snz
+    out["dp_max"] = _sqrt0(zonotope_max_sq(J[:3] * dq))
+    out["dw_max"] = _sqrt0(zonotope_max_sq(J[3:] * dq))
+    return out
+
+
+def _check_config(robot: Robot, B) -> None:
+    shape = (robot.n_segments, 2)
+    if np.shape(B) != shape:  # shapes are static: a clear error, never a broadcast
+        raise ValueError(f"B must have shape {shape} (one bending vector per segment, rad), got {jnp.shape(B)}")
+    if not isinstance(B, jax.core.Tracer):
+        phi = np.sqrt(np.sum(np.asarray(B, dtype=float) ** 2, axis=1))
+        big = np.isfinite(phi) & (phi > np.pi)
+        if np.any(big):
+            j = int(np.argmax(big))
+            raise ValueError(f"segment {j} bends by {phi[j]:g} rad, beyond pi: B is in radians (|b_j| = bending angle)")
+
+
+def _one_segment(robot: Robot, B):
+    """The segment and its pose ``(theta_L, delta)`` for a one-segment robot at ``B`` (1, 2)."""
+    theta_L, delta = b_to_psi(jnp.asarray(B, robot.route_angles.dtype)[0])
+    return robot.segments[0], theta_L, delta
+
+
+def config_measures(robot: Robot, B, dq=DEFAULT_DQ, mask=None, general: bool = False):
+    """Every measure of :data:`~._metrics.MEASURES` at one configuration, full or reduced.
+
+    Args:
+        robot: the robot (its shapes are static, its numbers traced).
+        B: (S, 2) bending vectors, one per segment (rad; ``|b_j|`` is segment ``j``'s bending angle).
+        dq: joint-level uncertainty bound (mm), scalar: the box ``dq [-1, 1]^N``.
+        mask: ``None`` (traditional, all wires) or (N,) 0/1 (reduced: the taut wires' rows).
+        general: use the chain formulas even for one segment (the same numbers wherever the taut wires
+            fix the configuration; see the module's note on coordinates).
+
+    Returns a dict of scalars, as :func:`~._metrics.pose_measures`: ``kci_v``, ``kci_w`` (the
+    ``min(3, 2S)``-th over the largest singular value of ``J_v``, ``J_w``), ``sigma_min_v``,
+    ``sigma_min_w``, ``sigma_min_nz_v``, ``sigma_min_nz_w``, ``dp_max`` (mm) and ``dw_max`` (rad): the
+    largest tip displacement and rotation over the box, exact. Base frame.
+    """
+    _check_config(robot, B)
+    if robot.n_segments == 1 and not general:
+        seg, theta_L, delta = _one_segment(robot, B)
+        return pose_measures(seg, theta_L, delta, dq, mask)
+    return _chain_measures(robot, B, dq, mask)
+
+
+def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
+    """Full and reduced measures at one configuration, flat, as :func:`~._metrics.pose_metrics`:
+    ``{"n_taut", "<measure>_full", "<measure>_reduced"}`` plus ``n_taut_segments`` (S,), the taut
+    wires acting on each segment (a distal wire counts in every segment it crosses).
+
+    ``B`` (S, 2) in rad; the reduced mask is :meth:`Robot.tension_mask` (every segment bending further
+    in its own plane), with its straight-through gradient.
+    """
+    _check_config(robot, B)
+    B = jnp.asarray(B, robot.route_angles.dtype)
+    mask = robot.tension_mask(B)
+    crossing = jnp.sum(jnp.where(robot.crosses, (mask > 0.5)[:, None], False), axis=0).astype(jnp.int32)
+    if robot.n_segments == 1 and not general:
+        seg, theta_L, delta = _one_segment(robot, B)
+        out = pose_metrics(seg, theta_L, delta, dq)
+    else:
+        bad = ~jnp.all(jnp.isfinite(B)) | ~jnp.isfinite(jnp.asarray(dq, B.dtype))
+        out = {"n_taut": jnp.where(bad, -1, jnp.sum(mask > 0.5)).astype(jnp.int32)}
+        for mode, m in (("full", None), ("reduced", mask)):
+            for k, v in _chain_measures(robot, B, dq, m).items():
+                out[f"{k}_{mode}"] = v
+    out["n_taut_segments"] = crossing
+    return out

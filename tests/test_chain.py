@@ -1,0 +1,156 @@
+"""Measures of robots of one, two and three segments (tension_zones/analysis/_chain.py) against an
+independent NumPy reference (tests/reference_chain.py), the segment's own measures and brute force."""
+
+import itertools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from reference_chain import measures
+
+import tension_zones as tz
+from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
+from tension_zones.model import Robot
+from tension_zones.model._kinematics import psi_to_b
+
+SEGMENTS = (
+    tz.Design(3, 30.0, 4.0),
+    tz.Design(4, 25.0, 3.0, wire_angles=np.radians([10, 100, 190, 280])),
+    tz.Design(3, 20.0, 2.5, wire_angles=np.radians([30, 150, 270])),
+)
+
+
+def _robot(S, routed=False):
+    if not routed:
+        return Robot(SEGMENTS[:S])
+    n = sum(s.n_wires for s in SEGMENTS[:S])
+    rng = np.random.default_rng(S)
+    return Robot(SEGMENTS[:S], route_angles=rng.uniform(0, 2 * np.pi, (n, S)), route_radii=rng.uniform(2, 5, (n, S)))
+
+
+# compiled once per robot structure: new configurations and robots of the same shape reuse it
+METRICS = jax.jit(config_metrics, static_argnames="general")
+
+
+def _reference(robot, B, dq=0.4):
+    args = (np.asarray(robot.lengths), np.asarray(robot.route_angles), np.asarray(robot.route_radii))
+    return measures(*args, np.asarray(robot.crosses), B, dq)
+
+
+def _compare(robot, B, tol=1e-6):
+    got, want = METRICS(robot, jnp.asarray(B, float), 0.4, general=True), _reference(robot, B)
+    for k, v in want.items():
+        assert float(got[k]) == pytest.approx(v, rel=tol, abs=tol), (k, np.asarray(B).tolist())
+
+
+# the straight robot, one straight segment, a wire on its zone boundary (segment 0's wire 0 at 0 deg:
+# bending towards 90 deg puts it at cos = 0), and general configurations
+SPECIAL = {
+    2: [np.zeros((2, 2)), [[0.0, 0.0], [0.5, -0.2]], [[0.0, 0.4], [0.0, 0.0]], [[0.0, 0.4], [0.0, 0.4]]],
+    3: [np.zeros((3, 2)), [[0.0, 0.0], [0.0, 0.0], [0.6, 0.1]], [[0.0, -0.7], [0.3, 0.0], [0.0, 0.0]]],
+}
+
+
+@pytest.mark.parametrize("S", [2, 3])
+@pytest.mark.parametrize("routed", [False, True])
+def test_straight_boundary_and_general_configurations_match_the_numpy_reference(S, routed):
+    rob = _robot(S, routed)
+    rng = np.random.default_rng(7)
+    for B in SPECIAL[S] + [rng.uniform(-1.2, 1.2, (S, 2)) for _ in range(3)]:
+        _compare(rob, np.asarray(B, float))
+
+
+@given(st.lists(st.floats(-1.5, 1.5), min_size=4, max_size=4))
+def test_two_segments_match_the_numpy_reference_anywhere(x):
+    _compare(_robot(2, routed=True), np.reshape(x, (2, 2)))
+
+
+def test_a_one_segment_robot_gives_the_designs_numbers_on_the_paper_grid():
+    th, de = np.meshgrid(np.radians(np.arange(0, 86, 5.0)), np.radians(np.arange(0, 360.1, 2.5)), indexing="ij")
+    th, de = jnp.asarray(th.ravel()), jnp.asarray(de.ravel())
+    for seg in (tz.Design(3, 20.0, 2.0), tz.Design(4, 20.0, 2.0)):
+        B = jax.vmap(psi_to_b)(th, de)[:, None, :]
+        got = jax.jit(jax.vmap(config_metrics, (None, 0, None)))(Robot(seg), B, 0.4)
+        want = jax.jit(jax.vmap(tz.pose_metrics, (None, 0, 0, None)))(seg, th, de, 0.4)
+        for k in want:
+            np.testing.assert_allclose(np.asarray(got[k]), np.asarray(want[k]), rtol=1e-10, atol=1e-10, err_msg=k)
+
+
+def test_the_chain_formulas_agree_with_the_segments_where_the_taut_wires_fix_the_configuration():
+    """With one segment the chain formulas (bending vectors) and the segment's (theta_L, delta) differ
+    only where fewer than two wires act (the pseudo-inverse's minimum norm depends on the coordinates):
+    all wires, and the reduced Jacobian of four wires, agree."""
+    rob = Robot(tz.Design(4, 20.0, 2.0))
+    for th, de in itertools.product(np.radians([85.0, 60.0, 5.0]), np.radians([20.0, 135.0, 250.0])):
+        B = psi_to_b(th, de)[None]
+        got, want = METRICS(rob, B, 0.4, general=True), METRICS(rob, B, 0.4)
+        for k in want:
+            np.testing.assert_allclose(np.asarray(got[k]), np.asarray(want[k]), rtol=1e-10, atol=1e-12, err_msg=k)
+
+
+@pytest.mark.parametrize("S", [2, 3])
+def test_gradients_are_finite_at_straight_and_boundary_configurations(S):
+    rob = _robot(S)
+
+    def total(B, r):
+        m = config_metrics(r, B, 0.4)
+        return sum(jnp.sum(v) for k, v in m.items() if not k.startswith("n_taut"))
+
+    grad = jax.jit(jax.grad(total, argnums=(0, 1)))
+    for B in SPECIAL[S]:
+        grads = grad(jnp.asarray(B, float), rob)
+        assert all(bool(jnp.all(jnp.isfinite(g))) for g in jax.tree_util.tree_leaves(grads))
+
+
+def _brute(G):
+    s = np.array(list(itertools.product([-1.0, 1.0], repeat=G.shape[1]))).T
+    return np.max(np.sum((G @ s) ** 2, axis=0))
+
+
+@st.composite
+def generators(draw):
+    n = draw(st.integers(1, 7))
+    G = np.array(draw(st.lists(st.floats(-3, 3), min_size=3 * n, max_size=3 * n))).reshape(3, n)
+    kind = draw(st.sampled_from(["any", "flat", "line", "parallel", "zeros"]))
+    if kind == "flat":
+        G[2] = 0.0
+    elif kind == "line":
+        G = np.outer([0.3, -1.0, 2.0], G[0])
+    elif kind == "parallel" and n > 1:
+        G[:, -1] = -2.0 * G[:, 0]
+    elif kind == "zeros":
+        G[:, : n // 2] = 0.0
+    return G
+
+
+ZONOTOPE = jax.jit(zonotope_max_sq)
+
+
+@given(generators())
+def test_the_zonotopes_largest_norm_is_its_largest_vertex(G):
+    assert float(ZONOTOPE(jnp.asarray(G))) == pytest.approx(_brute(G), rel=1e-12, abs=1e-12)
+
+
+def test_new_values_never_recompile():
+    f = jax.jit(lambda r, B, dq: config_metrics(r, B, dq))
+    f(_robot(2), jnp.zeros((2, 2)), 0.4)
+    f(_robot(2, routed=True), jnp.ones((2, 2)) * 0.3, 0.7)
+    assert f._cache_size() == 1
+
+
+@pytest.mark.parametrize(
+    "B, message",
+    [(np.zeros((3, 2)), r"shape \(2, 2\)"), ([[0.0, 60.0], [0.0, 0.0]], "beyond pi: B is in radians")],
+)
+def test_a_configuration_of_the_wrong_shape_or_in_degrees_is_refused(B, message):
+    with pytest.raises(ValueError, match=message):
+        config_measures(_robot(2), B)
+
+
+def test_nan_in_gives_nan_out():
+    m = METRICS(_robot(2), jnp.array([[np.nan, 0.0], [0.1, 0.2]]), 0.4)
+    assert int(m["n_taut"]) == -1
+    assert all(bool(jnp.isnan(v)) for k, v in m.items() if not k.startswith("n_taut"))
