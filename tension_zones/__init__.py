@@ -74,7 +74,9 @@ _WHERE = {
         "analysis",
     ),
     **dict.fromkeys(("Load", "Robot", "equilibrium", "forward"), "model"),
-    **dict.fromkeys(("sweep_designs",), "analysis"),
+    **dict.fromkeys(
+        ("sweep_designs", "sweep_configs", "config_measures", "config_metrics", "config_samples"), "analysis"
+    ),
     **dict.fromkeys(("Space", "explore", "explore_designs", "load_space", "parse_space", "pareto_front"), "design"),
     **dict.fromkeys(
         ("DataError", "Dataset", "calibrate", "load_data", "read_csv", "read_opencr", "write_report"), "calibration"

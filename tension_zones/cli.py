@@ -237,16 +237,25 @@ def _with_compliance(args):
 
 def cmd_sweep(args) -> None:
     from .analysis._sweep import grid_deg, grid_size, sweep_grid
+    from .model import Design
     from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
 
     out = _check_out_file(args.out, ".npz", args.force)
+    subject = _sweep_subject(args)
+    if not isinstance(subject, Design):
+        return _sweep_robot(args, subject, out)
+    if args.samples is not None or args.max_bend is not None:
+        raise CLIError(
+            "--samples and --max-bend sample a robot of several segments; a segment sweeps the "
+            "theta_L x delta grid (--theta-step, --delta-step)"
+        )
     if args.compliance:
         missing = [f for f in ("wire_stiffness", "backbone_EI", "load") if getattr(args, f) is None]
         if missing:
             raise CLIError("--compliance needs " + ", ".join("--" + m.replace("_", "-") for m in missing))
     elif any(getattr(args, f) is not None for f in ("wire_stiffness", "backbone_EI", "load", "preload")):
         raise CLIError("--wire-stiffness, --backbone-EI, --load and --preload go with --compliance")
-    design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
+    design = subject
     if args.compliance:
         try:
             design = design.replace(
@@ -303,12 +312,79 @@ def cmd_sweep(args) -> None:
             )
 
 
+def _sweep_subject(args):
+    """The segment (``--wires``, ``--length``, ``--pitch-radius``, or a one-segment ``--design`` file) or
+    the robot (a ``--design`` file of several segments) to sweep."""
+    from .model import Design, Robot
+
+    given = [f for f in ("wires", "length", "pitch_radius", "angles") if getattr(args, f) is not None]
+    if args.design is not None:
+        if given:
+            flags = ", ".join("--" + f.replace("_", "-") for f in given)
+            raise CLIError(f"{flags}: the --design file sets the robot; give one or the other")
+        try:
+            robot = Robot.from_json(args.design)
+        except ValueError as e:
+            raise CLIError(str(e)) from None
+        return robot.segments[0] if robot.n_segments == 1 else robot
+    missing = [f for f in ("wires", "length", "pitch_radius") if getattr(args, f) is None]
+    if missing:
+        raise CLIError(
+            "sweep needs --design FILE, or "
+            + ", ".join("--" + f.replace("_", "-") for f in missing)
+            + " for one segment"
+        )
+    design: Design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
+    return design
+
+
+#: Configurations a robot's sweep samples unless ``--samples`` says otherwise.
+DEFAULT_SAMPLES = 1 << 16
+
+
+def _sweep_robot(args, robot, out) -> None:
+    """``sweep`` of a robot of several segments: its kinematic measures, full and reduced
+    (:func:`~tension_zones.analysis.config_metrics`), on Halton samples of its configurations."""
+    from ._io import atomic_path
+    from .analysis import config_metrics, config_samples, sweep_configs
+
+    S = robot.n_segments
+    if args.compliance:
+        raise CLIError(
+            f"--compliance takes a one-segment design; a robot of {S} segments sweeps its kinematic measures"
+        )
+    if args.theta_step is not None or args.delta_step is not None:
+        raise CLIError(
+            f"--theta-step and --delta-step are one segment's grid; a robot of {S} segments takes "
+            "--samples and --max-bend"
+        )
+    n = DEFAULT_SAMPLES if args.samples is None else args.samples
+    if not 1 <= n <= MAX_SWEEP_POSES:
+        raise CLIError(f"--samples must be 1 to {MAX_SWEEP_POSES:,}, got {n:,}")
+    max_bend = 90.0 if args.max_bend is None else args.max_bend
+    if not (np.isfinite(max_bend) and 0 < max_bend <= 180):
+        raise CLIError(f"--max-bend must be a bending angle in (0, 180] degrees, got {max_bend:g}")
+    _positive("--dq", args.dq)
+    B = config_samples(S, n, max_bend)
+    res = sweep_configs(config_metrics, robot, B, args.dq, quiet=args.quiet, desc=f"sweep ({S} segments)")
+    with atomic_path(out) as tmp:
+        np.savez(tmp, B=B, bend_deg=np.degrees(np.linalg.norm(B, axis=-1)), **res)  # type: ignore[arg-type]
+    if not args.quiet:
+        print(
+            f"wrote {out}: {n:,} configurations of {S} segments (Halton, |b_j| <= {max_bend:g} deg), {len(res) + 2} arrays"
+        )
+
+
 def _add_sweep_parser(sub) -> None:
     s = sub.add_parser("sweep", help="sweep performance measures over the workspace into a .npz")
-    s.add_argument("--wires", type=int, required=True, help="number of wires (>= 3)")
-    s.add_argument("--length", type=float, required=True, help="segment length L (mm)")
-    s.add_argument("--pitch-radius", type=float, required=True, help="wire pitch radius r (mm)")
-    s.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
+    s.add_argument(
+        "--design",
+        help="a design file (.design.json): one segment, or a robot of several (swept on --samples configurations)",
+    )
+    s.add_argument("--wires", type=int, help="number of wires (>= 3), without --design")
+    s.add_argument("--length", type=float, help="segment length L (mm), without --design")
+    s.add_argument("--pitch-radius", type=float, help="wire pitch radius r (mm), without --design")
+    s.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even), without --design")
     s.add_argument(
         "--theta-step",
         type=float,
@@ -319,6 +395,16 @@ def _add_sweep_parser(sub) -> None:
         "--delta-step", type=float, default=None, help="delta step (deg), 0..360 (default 2.5; with --compliance 15)"
     )
     s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
+    s.add_argument(
+        "--samples",
+        type=int,
+        help=f"a robot of several segments: configurations to sweep, Halton (default {DEFAULT_SAMPLES})",
+    )
+    s.add_argument(
+        "--max-bend",
+        type=float,
+        help="a robot of several segments: largest bending angle of each segment (deg, default 90)",
+    )
     s.add_argument(
         "--measure",
         choices=sorted(SWEEP_MEASURES),

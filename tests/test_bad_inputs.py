@@ -327,6 +327,37 @@ CLI = [
         "--compliance needs --wire-stiffness, --backbone-EI, --load",
     ),
     ("sweep-load-alone", SWEEP + ["--load", "1,2,3", "--out", "{tmp}/s.npz"], "go with --compliance"),
+    ("sweep-no-robot", ["sweep", "--length", "20", "--out", "{tmp}/s.npz"], "sweep needs --design FILE, or --wires"),
+    (
+        "sweep-design-and-wires",
+        ["sweep", "--design", "{tmp}/ftdcr.json", "--wires", "3", "--out", "{tmp}/s.npz"],
+        "--wires: the --design file sets the robot",
+    ),
+    (
+        "sweep-robot-compliance",
+        ["sweep", "--design", "{tmp}/ftdcr.json", "--compliance", "--out", "{tmp}/s.npz"],
+        "--compliance takes a one-segment design; a robot of 3 segments",
+    ),
+    (
+        "sweep-robot-theta-step",
+        ["sweep", "--design", "{tmp}/ftdcr.json", "--theta-step", "5", "--out", "{tmp}/s.npz"],
+        "a robot of 3 segments takes --samples and --max-bend",
+    ),
+    (
+        "sweep-robot-no-samples",
+        ["sweep", "--design", "{tmp}/ftdcr.json", "--samples", "0", "--out", "{tmp}/s.npz"],
+        "--samples must be 1 to",
+    ),
+    (
+        "sweep-robot-bend-in-radians-or-beyond",
+        ["sweep", "--design", "{tmp}/ftdcr.json", "--max-bend", "270", "--out", "{tmp}/s.npz"],
+        "--max-bend must be a bending angle in (0, 180] degrees, got 270",
+    ),
+    (
+        "sweep-segment-samples",
+        SWEEP + ["--samples", "100", "--out", "{tmp}/s.npz"],
+        "--samples and --max-bend sample a robot",
+    ),
     ("sweep-load-text", COMPLIANCE[:-1] + ["1,x,3", "--out", "{tmp}/s.npz"], "--load must be"),
     ("sweep-load-short", COMPLIANCE[:-1] + ["1,2", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),
     ("sweep-load-inf", COMPLIANCE[:-1] + ["inf,0,0", "--out", "{tmp}/s.npz"], "--load must be 3 finite"),

@@ -3,8 +3,11 @@
 import subprocess
 import sys
 
+import jax
+import numpy as np
 import pytest
 
+import tension_zones as tz
 from tension_zones.cli import main
 
 
@@ -194,3 +197,37 @@ def test_maps_of_many_wires_stay_legible(tmp_path, n):
     assert len(labels) <= 40, len(labels)  # before: 204 at 64 wires (every sector, ray and ring)
     assert all("," not in t for t in labels)  # no lists of wires
     assert main(["maps", "--wires", str(n), "--out", str(tmp_path / "m.png"), "--quiet"]) == 0
+
+
+def test_sweep_takes_a_robot_of_two_segments_from_a_design_file(tmp_path):
+    """Halton configurations of the shipped two-segment robot; every array is the robot's own
+    ``config_metrics`` at the configurations the file holds."""
+    out = tmp_path / "two.npz"
+    design = tz.example_path("design/two_segments.design.json")
+    main(["sweep", "--design", str(design), "--samples", "300", "--max-bend", "60", "--out", str(out), "--quiet"])
+    res = np.load(out)
+    assert res["B"].shape == (300, 2, 2) and np.all(res["bend_deg"] <= 60 + 1e-9)
+    robot = tz.Robot.from_json(design)
+    want = jax.jit(jax.vmap(tz.config_metrics, (None, 0, None)))(robot, res["B"][:5], 0.4)
+    for k, v in want.items():
+        np.testing.assert_allclose(res[k][:5], np.asarray(v), rtol=1e-12, err_msg=k)
+
+
+def test_sweep_of_a_one_segment_design_file_is_the_segments_grid(tmp_path, capsys):
+    a, b = tmp_path / "a.npz", tmp_path / "b.npz"
+    design = tz.example_path("synthetic/nominal_3w.design.json")
+    seg = tz.Robot.from_json(design).segments[0]
+    main(["sweep", "--design", str(design), "--theta-step", "17", "--delta-step", "30", "--out", str(a), "--quiet"])
+    angles = ",".join(f"{x:.12g}" for x in np.degrees(np.asarray(seg.wire_angles)))
+    flags = [
+        "--wires",
+        "3",
+        "--length",
+        f"{float(seg.length):.17g}",
+        "--pitch-radius",
+        f"{float(seg.pitch_radius):.17g}",
+    ]
+    main(["sweep", *flags, "--angles", angles, "--theta-step", "17", "--delta-step", "30", "--out", str(b), "--quiet"])
+    ra, rb = np.load(a), np.load(b)
+    for k in rb.files:
+        np.testing.assert_allclose(ra[k], rb[k], rtol=1e-12, err_msg=k)

@@ -34,6 +34,7 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 from ..model._design import Design
+from ..model._robot import Robot
 
 #: Poses per chunk and device: 2^14 keeps the working set of the kinematic measures near 50 MB.
 DEFAULT_CHUNK = 1 << 14
@@ -46,6 +47,11 @@ def default_chunk(n_wires: int) -> int:
     if n_wires <= 8:
         return DEFAULT_CHUNK
     return max(256, DEFAULT_CHUNK >> (2 * math.ceil(math.log2(n_wires / 8))))
+
+
+#: Configurations per chunk of a robot's sweep (:func:`sweep_configs`): its exact bounds take
+#: (N^2 / 2, N) pair terms per configuration, so a chunk is smaller than a segment's.
+ROBOT_CHUNK = 1 << 11
 
 
 #: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
@@ -70,8 +76,9 @@ def grid_size(stop: float, step: float, start: float = 0.0) -> int:
     return int(math.floor((stop - start) / step + 1e-9)) + 1
 
 
-def _eval_chunk(fn, design, theta_L, delta, args):
-    out = jax.vmap(lambda t, d: fn(design, t, d, *args))(theta_L, delta)
+def _eval_chunk(fn, subject, poses, args):
+    """``fn(subject, *pose, *args)`` vmapped over a chunk's poses (a tuple of arrays, one row a pose)."""
+    out = jax.vmap(lambda *pose: fn(subject, *pose, *args))(*poses)
     if not isinstance(out, dict):
         raise TypeError(f"a swept function must return a dict of arrays, got {type(out).__name__}")
     return out
@@ -105,7 +112,7 @@ def _eval_grid_chunk(fn, layout, design, start, th_grid, de_grid, n_de, n_poses,
     size, so the program depends on no grid dimension."""
     chunk, sharding = layout
     i = jax.lax.with_sharding_constraint(_grid_index(start, chunk, n_poses)[0], sharding)
-    return _eval_chunk(fn, design, *_grid_poses(i, th_grid, de_grid, n_de), args)
+    return _eval_chunk(fn, design, _grid_poses(i, th_grid, de_grid, n_de), args)
 
 
 _eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
@@ -126,20 +133,27 @@ def _mesh(devices):
     return Mesh(np.array(devices), ("poses",)), len(devices)
 
 
+def _subject_dtype(subject) -> np.dtype:
+    """The float dtype of a Design or a Robot (a robot's routing carries its segments' dtype)."""
+    if isinstance(subject, Design):
+        return subject.dtype
+    if isinstance(subject, Robot):
+        return np.dtype(subject.route_angles.dtype)
+    raise TypeError(f"design must be a tension_zones.Design or Robot, got {type(subject).__name__}")
+
+
 def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, desc, grid=None):
-    """Core loop: evaluate ``fn`` on poses ``poses_of(start, stop)`` (host arrays) or, given
-    ``grid = (theta_L, delta)`` with both axes no longer than a chunk, on that grid's poses generated
-    on the device; results flat (N, ...)."""
-    if not isinstance(design, Design):
-        raise TypeError(f"design must be a tension_zones.Design, got {type(design).__name__}")
+    """Core loop: evaluate ``fn`` on poses ``poses_of(start, stop)`` (a tuple of host arrays, one row a
+    pose) or, given ``grid = (theta_L, delta)`` with both axes no longer than a chunk, on that grid's
+    poses generated on the device; results flat (N, ...). ``design`` is a Design or a Robot."""
+    dt = _subject_dtype(design)
     if chunk_size is None:
-        chunk_size = default_chunk(design.n_wires)
+        chunk_size = default_chunk(design.n_wires) if isinstance(design, Design) else ROBOT_CHUNK
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     mesh, n_dev = _mesh(devices)
     chunk = int(chunk_size) * n_dev  # every device always gets chunk_size poses (see module doc)
     batch, replicated = NamedSharding(mesh, PartitionSpec("poses")), NamedSharding(mesh, PartitionSpec())
-    dt = design.dtype
     design_d = jax.device_put(design, replicated)
     args_d = jax.device_put(jax.tree_util.tree_map(np.asarray, tuple(args)), replicated)
 
@@ -158,11 +172,10 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
             th_g, de_g, n_de, n_all = grid_d
             res = _eval_grid_chunk_jit(fn, (chunk, batch), design_d, idx_t(start), th_g, de_g, n_de, n_all, args_d)
             return start, stop, res
-        th, de = (np.asarray(x, dt) for x in poses_of(start, stop))
+        poses = [np.asarray(x, dt) for x in poses_of(start, stop)]
         if stop - start < chunk:  # pad with the first pose: one compiled shape for every chunk
-            pad = chunk - (stop - start)
-            th, de = np.concatenate([th, np.full(pad, th[0], dt)]), np.concatenate([de, np.full(pad, de[0], dt)])
-        res = _eval_chunk_jit(fn, design_d, jax.device_put(th, batch), jax.device_put(de, batch), args_d)
+            poses = [np.concatenate([x, np.repeat(x[:1], chunk - (stop - start), axis=0)]) for x in poses]
+        res = _eval_chunk_jit(fn, design_d, tuple(jax.device_put(x, batch) for x in poses), args_d)
         return start, stop, res
 
     results: dict[str, np.ndarray] = {}
@@ -252,6 +265,37 @@ def sweep_poses(
     return _run(fn, design, th.size, lambda a, b: (th[a:b], de[a:b]), args, chunk_size, devices, quiet, keep, desc)
 
 
+def sweep_configs(
+    fn: Callable,
+    robot: Robot,
+    B,
+    *args,
+    chunk_size: int | None = None,
+    devices: Sequence | None = None,
+    quiet: bool = False,
+    keep: Sequence[str] | None = None,
+    desc: str | None = None,
+) -> dict[str, np.ndarray]:
+    """Evaluate ``fn(robot, B[i], *args)`` for every configuration ``i`` of a robot.
+
+    Args:
+        fn: pure single-configuration function returning a dict of arrays, e.g.
+            :func:`tension_zones.analysis.config_metrics`.
+        robot: the robot (its numbers are traced: new values reuse the compiled code).
+        B: (M, S, 2) configurations, rad (e.g. :func:`tension_zones.analysis.config_samples`).
+        chunk_size: configurations per device and compiled call (default :data:`ROBOT_CHUNK`); the
+            other arguments as :func:`sweep_poses`.
+
+    Returns a dict of NumPy arrays ``(M, ...)``.
+    """
+    if not isinstance(robot, Robot):
+        raise TypeError(f"robot must be a tension_zones.Robot, got {type(robot).__name__}")
+    B = np.asarray(B, dtype=float)
+    if B.ndim != 3 or B.shape[1:] != (robot.n_segments, 2):
+        raise ValueError(f"B must have shape (M, {robot.n_segments}, 2) for this robot, got {B.shape}")
+    return _run(fn, robot, B.shape[0], lambda a, b: (B[a:b],), args, chunk_size, devices, quiet, keep, desc or "sweep")
+
+
 def sweep_grid(
     fn: Callable,
     design: Design,
@@ -336,7 +380,7 @@ def _design_stats(fn, stats, chunk, design, th_grid, de_grid, n_de, n_poses, arg
 
     def step(c, acc):
         i, real = _grid_index(c * chunk, chunk, n_poses)
-        out = _eval_chunk(fn, design, *_grid_poses(i, th_grid, de_grid, n_de), args)
+        out = _eval_chunk(fn, design, _grid_poses(i, th_grid, de_grid, n_de), args)
         return tuple(_reduce_step(op, a, out[key], real) for (_, key, op), a in zip(stats, acc))
 
     init = tuple((jnp.asarray(_IDENTITY[op], dt), jnp.zeros((), dt)) for _, _, op in stats)

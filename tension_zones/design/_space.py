@@ -19,6 +19,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from ..analysis._samples import halton
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, positive_int
 from ..model._design import (
     _DATA_FIELDS,
@@ -167,34 +168,6 @@ class Space:
         leaves["wire_angles"] = np.radians(np.stack([cols[f"wire_angle_{k + 1}_deg"] for k in range(n)], 1))
         template = jax.tree_util.tree_structure(Design(n, 2.0, 1.0))
         return jax.tree_util.tree_unflatten(template, [leaves[f] for f in _DATA_FIELDS])
-
-
-def halton(n: int, dims: int, start: int = 1) -> np.ndarray:
-    """Points ``start .. start + n - 1`` of the Halton sequence in ``[0, 1)^dims``, (n, dims).
-
-    Dimension j is the radical inverse of the index in the j-th prime base (2, 3, 5, ...). Point 0
-    is the origin, so the default starts at 1. Deterministic, unscrambled (``scipy.stats.qmc.Halton``
-    with ``scramble=False`` gives the same points); fine for the handful of dimensions of a space.
-    """
-    idx = np.arange(start, start + n)
-    out = np.zeros((n, dims))
-    for j, base in enumerate(_primes(dims)):
-        k, f = idx.copy(), 1.0
-        while np.any(k > 0):
-            f /= base
-            out[:, j] += f * (k % base)
-            k //= base
-    return out
-
-
-def _primes(count: int) -> list[int]:
-    primes: list[int] = []
-    c = 2
-    while len(primes) < count:
-        if all(c % p for p in primes if p * p <= c):
-            primes.append(c)
-        c += 1
-    return primes
 
 
 def _field(key, v, lo=None, lo_open=False):
