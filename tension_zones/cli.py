@@ -236,12 +236,15 @@ def _with_compliance(args):
 
 
 def cmd_sweep(args) -> None:
+    from .analysis import DEFAULT_DQ
     from .analysis._sweep import grid_deg, grid_size, sweep_grid
     from .model import Design
     from .model._statics import PAPER_DELTA_DEG, PAPER_THETA_L_DEG
 
     out = _check_out_file(args.out, ".npz", args.force)
     subject = _sweep_subject(args)
+    if args.dq is None:
+        args.dq = DEFAULT_DQ
     if not isinstance(subject, Design):
         return _sweep_robot(args, subject, out)
     if args.samples is not None or args.max_bend is not None:
@@ -315,7 +318,7 @@ def cmd_sweep(args) -> None:
 def _sweep_subject(args):
     """The segment (``--wires``, ``--length``, ``--pitch-radius``, or a one-segment ``--design`` file) or
     the robot (a ``--design`` file of several segments) to sweep."""
-    from .model import Design, Robot
+    from .model import Design, Robot, read_json
 
     given = [f for f in ("wires", "length", "pitch_radius", "angles") if getattr(args, f) is not None]
     if args.design is not None:
@@ -326,6 +329,11 @@ def _sweep_subject(args):
             robot = Robot.from_json(args.design)
         except ValueError as e:
             raise CLIError(str(e)) from None
+        play = Robot.calibrated_block(read_json(args.design, "design file")).get("wire_play_mm")
+        if args.dq is None and play is not None and max(play) > 0:
+            args.dq = np.asarray(play, float) if robot.n_segments > 1 else max(play)
+            if not args.quiet:
+                print(f"dq: the calibrated play of each wire ({', '.join(f'{p:.3g}' for p in play)} mm)")
         return robot.segments[0] if robot.n_segments == 1 else robot
     missing = [f for f in ("wires", "length", "pitch_radius") if getattr(args, f) is None]
     if missing:
@@ -364,7 +372,8 @@ def _sweep_robot(args, robot, out) -> None:
     max_bend = 90.0 if args.max_bend is None else args.max_bend
     if not (np.isfinite(max_bend) and 0 < max_bend <= 180):
         raise CLIError(f"--max-bend must be a bending angle in (0, 180] degrees, got {max_bend:g}")
-    _positive("--dq", args.dq)
+    if np.ndim(args.dq) == 0:  # (a calibrated file's play per wire is checked when it is read)
+        _positive("--dq", args.dq)
     B = config_samples(S, n, max_bend)
     res = sweep_configs(config_metrics, robot, B, args.dq, quiet=args.quiet, desc=f"sweep ({S} segments)")
     with atomic_path(out) as tmp:
@@ -394,7 +403,11 @@ def _add_sweep_parser(sub) -> None:
     s.add_argument(
         "--delta-step", type=float, default=None, help="delta step (deg), 0..360 (default 2.5; with --compliance 15)"
     )
-    s.add_argument("--dq", type=float, default=0.4, help="joint uncertainty bound (mm, default 0.4)")
+    s.add_argument(
+        "--dq",
+        type=float,
+        help="joint uncertainty bound (mm, default 0.4; a calibrated design file's play of each wire)",
+    )
     s.add_argument(
         "--samples",
         type=int,

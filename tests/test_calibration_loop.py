@@ -215,6 +215,37 @@ def test_cli_end_to_end(tmp_path, capsys):
     assert "| declared design" in md and "registration" in md
     for png in rep["plots"]:
         assert (out / png).stat().st_size > 20_000
+    # the calibrated robot is a design file the design tools take, with the fitted numbers in it
+    calibrated = out / "calibrated.design.json"
+    robot = tz.Robot.from_json(calibrated)
+    phys = rep["parameters"]["physical"]
+    np.testing.assert_allclose(np.asarray(robot.lengths), phys["length"], rtol=1e-15)
+    np.testing.assert_allclose(np.asarray(robot.backbone_EI), phys["EI"], rtol=1e-15)
+    assert (
+        main(["sweep", "--design", str(calibrated), "--theta-step", "17", "--out", str(tmp_path / "s.npz"), "--quiet"])
+        == 0
+    )
+
+
+def test_a_calibrated_design_file_keeps_every_fitted_routing_and_per_wire_value():
+    """FTDCR v4's shipped report: the design file's robot has the calibration's routing exactly (the
+    twist between segments, the fitted radii), and its block the per-wire values a segment cannot hold."""
+    from tension_zones.calibration._design_file import calibrated_design
+
+    rep = json.loads(tz.example_path("ftdcr_v4/calibration.json").read_text())
+    d = calibrated_design(rep["parameters"], (3, 3, 3))
+    robot, phys = tz.Robot.from_dict(d), rep["parameters"]["physical"]
+    cross = np.asarray(robot.crosses)
+    np.testing.assert_allclose(
+        np.degrees(robot.route_angles)[cross], np.asarray(phys["route_angles_deg"])[cross], atol=1e-12
+    )
+    np.testing.assert_allclose(np.asarray(robot.route_radii)[cross], np.asarray(phys["route_radii"])[cross], rtol=1e-15)
+    block = tz.Robot.calibrated_block(d)
+    assert block["preload_N"] == phys["preload"]
+    assert block["wire_play_mm"] == [rep["parameters"]["fitted"]["backlash"][f"play_{k}_mm"] for k in range(1, 10)]
+    d["calibrated"]["wire_play_mm"][0] = -0.1
+    with pytest.raises(ValueError, match="wire_play_mm must be at least 0"):
+        tz.Robot.from_dict(d)
 
 
 def test_worker_count(monkeypatch):

@@ -150,7 +150,8 @@ def config_measures(robot: Robot, B, dq=DEFAULT_DQ, mask=None, general: bool = F
     Args:
         robot: the robot (its shapes are static, its numbers traced).
         B: (S, 2) bending vectors, one per segment (rad; ``|b_j|`` is segment ``j``'s bending angle).
-        dq: joint-level uncertainty bound (mm), scalar: the box ``dq [-1, 1]^N``.
+        dq: joint-level uncertainty bound (mm): a scalar, the box ``dq [-1, 1]^N``, or one per wire
+            (N,), e.g. a calibration's play (a vector takes the chain formulas for one segment too).
         mask: ``None`` (traditional, all wires) or (N,) 0/1 (reduced: the taut wires' rows).
         general: use the chain formulas even for one segment (the same numbers wherever the taut wires
             fix the configuration; see the module's note on coordinates).
@@ -161,7 +162,7 @@ def config_measures(robot: Robot, B, dq=DEFAULT_DQ, mask=None, general: bool = F
     largest tip displacement and rotation over the box, exact. Base frame.
     """
     _check_config(robot, B)
-    if robot.n_segments == 1 and not general:
+    if robot.n_segments == 1 and not general and np.ndim(dq) == 0:
         seg, theta_L, delta = _one_segment(robot, B)
         return pose_measures(seg, theta_L, delta, dq, mask)
     return _chain_measures(robot, B, dq, mask)
@@ -179,11 +180,11 @@ def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
     B = jnp.asarray(B, robot.route_angles.dtype)
     mask = robot.tension_mask(B)
     crossing = jnp.sum(jnp.where(robot.crosses, (mask > 0.5)[:, None], False), axis=0).astype(jnp.int32)
-    if robot.n_segments == 1 and not general:
+    if robot.n_segments == 1 and not general and np.ndim(dq) == 0:
         seg, theta_L, delta = _one_segment(robot, B)
         out = pose_metrics(seg, theta_L, delta, dq)
     else:
-        bad = ~jnp.all(jnp.isfinite(B)) | ~jnp.isfinite(jnp.asarray(dq, B.dtype))
+        bad = ~jnp.all(jnp.isfinite(B)) | ~jnp.all(jnp.isfinite(jnp.asarray(dq, B.dtype)))
         out = {"n_taut": jnp.where(bad, -1, jnp.sum(mask > 0.5)).astype(jnp.int32)}
         for mode, m in (("full", None), ("reduced", mask)):
             for k, v in _chain_measures(robot, B, dq, m).items():

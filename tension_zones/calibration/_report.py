@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from .._io import save_figure, staged_folder
+from ._design_file import calibrated_design
 from ._fits import SCREEN_ITERATIONS, rmse
 from ._loop import EXCESS_RATIO, SECOND_LOOK_SHARE, STRUCTURE_Z, Result
 
@@ -23,7 +24,9 @@ PLOTS = {
 }
 PATHS_PLOT = "tip_paths.png"
 #: The files a report folder holds (a new report never silently replaces them).
-FILES = ("report.json", "report.md", *PLOTS.values(), PATHS_PLOT)
+#: The calibrated robot as a design file, for every design command's ``--design``.
+DESIGN_FILE = "calibrated.design.json"
+FILES = ("report.json", "report.md", DESIGN_FILE, *PLOTS.values(), PATHS_PLOT)
 
 
 def _pyplot():
@@ -481,6 +484,9 @@ def write_report(res: Result, out_dir, **extra) -> dict:
     with staged_folder(out, last=("report.json", "report.md")) as stage:
         report["plots"] = [p.name for p in plot_residuals(res, stage)] + [plot_paths(res, stage).name]
         report = _jsonable(report)
+        wires = res.problem.model.structure.n_wires_per_segment
+        design = calibrated_design(report["parameters"], wires, "report.json")
+        (stage / DESIGN_FILE).write_text(json.dumps(design, indent=1))
         (stage / "report.json").write_text(json.dumps(report, indent=1))
         (stage / "report.md").write_text(markdown(report))
     return report

@@ -388,9 +388,9 @@ class Robot:
             raise ValueError(f"a design file must hold a JSON object, got {type(d).__name__}")
         if "segments" not in d:
             return cls(Design.from_dict(d, warn_missing=warn_missing))
-        extra = sorted(set(d) - {"segments"})
+        extra = sorted(set(d) - {"segments", "calibrated"})
         if extra:
-            raise ValueError(f"unknown robot design key(s) {extra}; known: ['segments']")
+            raise ValueError(f"unknown robot design key(s) {extra}; known: ['calibrated', 'segments']")
         segs = d["segments"]
         if not isinstance(segs, list) or not segs:
             raise ValueError("'segments' must be a non-empty list of segment designs")
@@ -408,6 +408,8 @@ class Robot:
         if warn_missing:
             _warn_missing(designs, segs)
         robot = cls(designs)
+        if "calibrated" in d:
+            check_calibrated(d["calibrated"], robot.n_wires)
         if not any(routes):
             return robot
         ra, rr = np.array(robot.route_angles), np.array(robot.route_radii)
@@ -421,6 +423,13 @@ class Robot:
             k0 += seg.n_wires
         _check_holes(robot, ra, rr, given)
         return cls(designs, route_angles=ra, route_radii=rr)
+
+    @staticmethod
+    def calibrated_block(d: dict[str, Any]) -> dict[str, Any]:
+        """A design file's ``calibrated`` block (``{}`` if it has none): the per-wire values a
+        calibration found (``calibrate``'s ``calibrated.design.json``, see
+        :mod:`tension_zones.calibration._design_file`), checked by :meth:`from_dict`."""
+        return dict(d.get("calibrated", {})) if isinstance(d, dict) else {}
 
     @classmethod
     def from_json(cls, path, warn_missing: bool = False) -> Robot:
@@ -460,6 +469,44 @@ class Robot:
 
 
 jax.tree_util.register_pytree_node(Robot, Robot._tree_flatten, Robot._tree_unflatten)
+
+
+#: A design file's ``calibrated`` block: the per-wire and robot-wide values of a calibration that a design file keeps beside its segments.
+CALIBRATED_KEYS = (
+    "wire_play_mm",
+    "preload_N",
+    "wire_stiffness_N_per_mm",
+    "friction",
+    "gravity_N_per_mm",
+    "clearance_mm_per_rad",
+    "report",
+)
+
+
+def check_calibrated(block, n_wires: int) -> dict[str, Any]:
+    """A design file's ``calibrated`` block, checked: known keys; per-wire lists of ``n_wires`` finite
+    numbers (a play at least 0); the rest lists of finite numbers. One ValueError line otherwise."""
+    if not isinstance(block, dict):
+        raise ValueError(f"'calibrated' must be a JSON object, got {type(block).__name__}")
+    unknown = sorted(set(block) - set(CALIBRATED_KEYS))
+    if unknown:
+        raise ValueError(f"unknown 'calibrated' key(s) {unknown}; known: {sorted(CALIBRATED_KEYS)}")
+    for key, value in block.items():
+        if key == "report":
+            if not isinstance(value, str):
+                raise ValueError(f"calibrated.report must be a file name, got {value!r}")
+            continue
+        ok = isinstance(value, list) and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) for x in value
+        )
+        if not ok:
+            raise ValueError(f"calibrated.{key} must be a list of finite numbers")
+        per_wire = key in ("wire_play_mm", "preload_N", "wire_stiffness_N_per_mm")
+        if per_wire and len(value) != n_wires:
+            raise ValueError(f"calibrated.{key} has {len(value)} values for {n_wires} wires")
+        if key == "wire_play_mm" and min(value, default=0.0) < 0:
+            raise ValueError("calibrated.wire_play_mm must be at least 0 (a play, mm)")
+    return block
 
 
 def _warn_missing(designs, dicts) -> None:
