@@ -138,8 +138,14 @@ def _check_out_dir(path: str, force: bool = False, names=None, flag: str = "--ou
 
 
 def cmd_maps(args) -> None:
+    from .model import Design
+
     out = _check_out_file(args.out, ".png", args.force)
-    design = _design(args)
+    design = _subject(args, "maps", needs=("wires",))
+    if not isinstance(design, Design):
+        return _robot_maps(args, design, out)
+    if args.bend is not None:
+        raise CLIError("--bend is the other segments' bending in a robot's maps; a segment has none")
 
     import matplotlib.pyplot as plt
 
@@ -154,6 +160,41 @@ def cmd_maps(args) -> None:
         fig.savefig(tmp, dpi=130, bbox_inches="tight")
     plt.close(fig)
     print(tmap.table())
+    if not args.quiet:
+        print(f"wrote {out}")
+
+
+def _robot_maps(args, robot, out) -> None:
+    """``maps`` of a robot: each segment's tension map with the others straight and still, and with
+    the others bent ``--bend`` deg (towards delta = 0) and bending further: how they move its zones."""
+    from ._io import atomic_path
+    from .model._chain_zones import crossing_wires, segment_tension_map
+    from .plots import plot_segment_maps
+
+    bend = 45.0 if args.bend is None else args.bend
+    if not (np.isfinite(bend) and 0 < bend <= 180):
+        raise CLIError(f"--bend must be a bending angle in (0, 180] degrees, got {bend:g}")
+    S = robot.n_segments
+    rows = []
+    for label, phi in (("the others straight and still", 0.0), (f"the others bent {bend:g} deg towards 0 deg", bend)):
+        maps = []
+        for j in range(S):
+            B = np.zeros((S, 2))
+            B[:, 0] = np.radians(phi)
+            B[j] = 0.0
+            maps.append(segment_tension_map(robot, j, B))
+        rows.append((label, maps))
+    fig = plot_segment_maps(rows, [crossing_wires(robot, j) for j in range(S)])
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    for label, maps in rows:
+        for j, tmap in enumerate(maps):
+            wires = crossing_wires(robot, j)
+            print(f"segment {j + 1} of {S}, {label} (map wire k is robot wire {wires[0]} + k - 1):")
+            print(tmap.table())
     if not args.quiet:
         print(f"wrote {out}")
 
@@ -315,12 +356,12 @@ def cmd_sweep(args) -> None:
             )
 
 
-def _sweep_subject(args):
-    """The segment (``--wires``, ``--length``, ``--pitch-radius``, or a one-segment ``--design`` file) or
-    the robot (a ``--design`` file of several segments) to sweep."""
-    from .model import Design, Robot, read_json
+def _subject(args, command: str, needs=("wires", "length", "pitch_radius")):
+    """The segment (``--wires`` and the other flags in ``needs``, or a one-segment ``--design`` file) or
+    the robot (a ``--design`` file of several segments) a command works on."""
+    from .model import Robot
 
-    given = [f for f in ("wires", "length", "pitch_radius", "angles") if getattr(args, f) is not None]
+    given = [f for f in ("wires", "length", "pitch_radius", "angles") if getattr(args, f, None) is not None]
     if args.design is not None:
         if given:
             flags = ", ".join("--" + f.replace("_", "-") for f in given)
@@ -329,21 +370,33 @@ def _sweep_subject(args):
             robot = Robot.from_json(args.design)
         except ValueError as e:
             raise CLIError(str(e)) from None
-        play = Robot.calibrated_block(read_json(args.design, "design file")).get("wire_play_mm")
-        if args.dq is None and play is not None and max(play) > 0:
-            args.dq = np.asarray(play, float) if robot.n_segments > 1 else max(play)
-            if not args.quiet:
-                print(f"dq: the calibrated play of each wire ({', '.join(f'{p:.3g}' for p in play)} mm)")
         return robot.segments[0] if robot.n_segments == 1 else robot
-    missing = [f for f in ("wires", "length", "pitch_radius") if getattr(args, f) is None]
+    missing = [f for f in needs if getattr(args, f) is None]
     if missing:
         raise CLIError(
-            "sweep needs --design FILE, or "
+            f"{command} needs --design FILE, or "
             + ", ".join("--" + f.replace("_", "-") for f in missing)
             + " for one segment"
         )
-    design: Design = _design(args, length=args.length, pitch_radius=args.pitch_radius)
-    return design
+    return _design(
+        args, length=getattr(args, "length", None) or 20.0, pitch_radius=getattr(args, "pitch_radius", None) or 2.0
+    )
+
+
+def _sweep_subject(args):
+    """:func:`_subject` for ``sweep``; a calibrated design file's play of each wire becomes ``--dq``
+    unless it is given."""
+    from .model import Design, Robot, read_json
+
+    subject = _subject(args, "sweep")
+    if args.design is None:
+        return subject
+    play = Robot.calibrated_block(read_json(args.design, "design file")).get("wire_play_mm")
+    if args.dq is None and play is not None and max(play) > 0:
+        args.dq = np.asarray(play, float) if not isinstance(subject, Design) else max(play)
+        if not args.quiet:
+            print(f"dq: the calibrated play of each wire ({', '.join(f'{p:.3g}' for p in play)} mm)")
+    return subject
 
 
 #: Configurations a robot's sweep samples unless ``--samples`` says otherwise.
@@ -803,8 +856,15 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     m = sub.add_parser("maps", help="draw a design's tension map and print its sector table")
-    m.add_argument("--wires", type=int, required=True, help="number of wires (>= 3)")
-    m.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even)")
+    m.add_argument(
+        "--design",
+        help="a design file: one segment, or a robot (each segment's map, the others straight and bent)",
+    )
+    m.add_argument("--wires", type=int, help="number of wires (>= 3), without --design")
+    m.add_argument("--angles", help="wire angles in degrees, comma-separated (default: even), without --design")
+    m.add_argument(
+        "--bend", type=float, help="a robot: the other segments' bending in the second row (deg, default 45)"
+    )
     m.add_argument("--out", required=True, help="output PNG file")
     _add_force(m, "an existing --out file")
     m.add_argument("--quiet", action="store_true", help="print only the table")

@@ -380,3 +380,19 @@ def write_outputs(result: dict[str, Any], out_dir) -> list:
         plot_tradeoff(result, stage / OUTPUT_FILES[1])
         plot_convergence(result, stage / OUTPUT_FILES[2], INFEASIBLE_RANK)
     return paths
+
+
+def plot_segment_maps(rows, wires):
+    """A robot's tension maps: one row per bending of the other segments, one panel per segment.
+
+    ``rows``: ``[(label, [TensionMap of segment j, ...]), ...]``; ``wires[j]``: the robot's wires
+    (1-based) crossing segment ``j``, the map's wires 1.. in order (:func:`~tension_zones.model._chain_zones.crossing_wires`).
+    """
+    n_rows, S = len(rows), len(rows[0][1])
+    fig, axes = plt.subplots(n_rows, S, figsize=(6.4 * S, 6.0 * n_rows), squeeze=False)
+    for r, (label, maps) in enumerate(rows):
+        for j, tmap in enumerate(maps):
+            first = int(wires[j][0])
+            title = f"segment {j + 1} of {S}, {label}\nmap wire k = robot wire {first} + k - 1"
+            plot_tension_map(tmap, ax=axes[r][j], title=title)
+    return fig

@@ -327,6 +327,17 @@ CLI = [
         "--compliance needs --wire-stiffness, --backbone-EI, --load",
     ),
     ("sweep-load-alone", SWEEP + ["--load", "1,2,3", "--out", "{tmp}/s.npz"], "go with --compliance"),
+    ("maps-no-robot", ["maps", "--out", "{tmp}/m.png"], "maps needs --design FILE, or --wires for one segment"),
+    (
+        "maps-bend-of-a-segment",
+        ["maps", "--wires", "3", "--bend", "30", "--out", "{tmp}/m.png"],
+        "--bend is the other segments' bending in a robot's maps",
+    ),
+    (
+        "maps-robot-bend-beyond",
+        ["maps", "--design", "{tmp}/ftdcr.json", "--bend", "-5", "--out", "{tmp}/m.png"],
+        "--bend must be a bending angle in (0, 180] degrees, got -5",
+    ),
     ("sweep-no-robot", ["sweep", "--length", "20", "--out", "{tmp}/s.npz"], "sweep needs --design FILE, or --wires"),
     (
         "sweep-design-and-wires",

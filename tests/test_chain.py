@@ -14,6 +14,7 @@ from reference_chain import measures
 import tension_zones as tz
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
 from tension_zones.model import Robot
+from tension_zones.model._chain_zones import crossing_wires, segment_tension_map
 from tension_zones.model._kinematics import psi_to_b
 
 SEGMENTS = (
@@ -154,3 +155,40 @@ def test_nan_in_gives_nan_out():
     m = METRICS(_robot(2), jnp.array([[np.nan, 0.0], [0.1, 0.2]]), 0.4)
     assert int(m["n_taut"]) == -1
     assert all(bool(jnp.isnan(v)) for k, v in m.items() if not k.startswith("n_taut"))
+
+
+# ------------------------------------------------------------------------------------------------
+# Tension maps of a robot's segments
+# ------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "seg",
+    [
+        tz.Design(3, 20.0, 2.0),
+        tz.Design(4, 20.0, 2.0),
+        tz.Design(5, 20.0, 2.0, wire_angles=np.radians([0, 50, 130, 200, 300])),
+    ],
+)
+def test_a_one_segment_robots_map_is_the_segments(seg):
+    assert segment_tension_map(Robot(seg), 0) == tz.tension_map(seg)
+
+
+@given(
+    st.floats(0.0, 360.0),
+    st.one_of(st.just(0.0), st.floats(1e-6, 1.5)),
+    st.floats(-np.pi, np.pi),
+    st.sampled_from([0, 1, 2]),
+)
+def test_a_segments_map_gives_the_robots_taut_wires(delta_deg, phi, other_dir, j):
+    """The map's taut set at any direction is the wires ``Robot.tension_score`` pulls in, with segment
+    ``j`` bending further there and the others bent and bending further in their own planes."""
+    rob = _robot(3, routed=True)
+    B = np.tile([phi * np.cos(other_dir), -phi * np.sin(other_dir)], (3, 1))
+    B[j] = 0.0
+    tmap = segment_tension_map(rob, j, B)
+    d = np.radians(delta_deg)
+    B_dot = B / np.maximum(np.linalg.norm(B, axis=1, keepdims=True), 1e-300)
+    B_dot[j] = [np.cos(d), -np.sin(d)]
+    score = np.asarray(rob.tension_score(jnp.asarray(B), jnp.asarray(B_dot)))
+    wires = crossing_wires(rob, j)
+    want = tuple(int(k) + 1 for k, w in enumerate(wires) if score[w - 1] > 1e-9)
+    assert tmap.taut_at(delta_deg) == want

@@ -231,3 +231,12 @@ def test_sweep_of_a_one_segment_design_file_is_the_segments_grid(tmp_path, capsy
     ra, rb = np.load(a), np.load(b)
     for k in rb.files:
         np.testing.assert_allclose(ra[k], rb[k], rtol=1e-12, err_msg=k)
+
+
+def test_maps_of_a_robot_draw_each_segment_with_the_others_straight_and_bent(tmp_path, capsys):
+    out = tmp_path / "robot.png"
+    design = tz.example_path("design/two_segments.design.json")
+    assert main(["maps", "--design", str(design), "--bend", "30", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert text.count("delta (deg)") == 4 and "segment 2 of 2, the others bent 30 deg" in text
+    assert out.stat().st_size > 50_000
