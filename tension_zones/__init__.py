@@ -73,7 +73,7 @@ _WHERE = {
         ("DEFAULT_DQ", "pose_measures", "pose_metrics", "zonogon_vertices", "grid_deg", "sweep_grid", "sweep_poses"),
         "analysis",
     ),
-    **dict.fromkeys(("Load", "Robot", "equilibrium", "forward"), "model"),
+    **dict.fromkeys(("Load", "Robot", "equilibrium", "forward", "config_compliance", "segment_tension_map"), "model"),
     **dict.fromkeys(
         ("sweep_designs", "sweep_configs", "config_measures", "config_metrics", "config_samples"), "analysis"
     ),

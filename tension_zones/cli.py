@@ -11,6 +11,7 @@ import math
 import os
 import sys
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -286,6 +287,7 @@ def cmd_sweep(args) -> None:
     subject = _sweep_subject(args)
     if args.dq is None:
         args.dq = DEFAULT_DQ
+    _check_compliance_flags(args)
     if not isinstance(subject, Design):
         return _sweep_robot(args, subject, out)
     if args.samples is not None or args.max_bend is not None:
@@ -293,14 +295,8 @@ def cmd_sweep(args) -> None:
             "--samples and --max-bend sample a robot of several segments; a segment sweeps the "
             "theta_L x delta grid (--theta-step, --delta-step)"
         )
-    if args.compliance:
-        missing = [f for f in ("wire_stiffness", "backbone_EI", "load") if getattr(args, f) is None]
-        if missing:
-            raise CLIError("--compliance needs " + ", ".join("--" + m.replace("_", "-") for m in missing))
-    elif any(getattr(args, f) is not None for f in ("wire_stiffness", "backbone_EI", "load", "preload")):
-        raise CLIError("--wire-stiffness, --backbone-EI, --load and --preload go with --compliance")
     design = subject
-    if args.compliance:
+    if args.compliance and args.design is None:
         try:
             design = design.replace(
                 wire_stiffness=args.wire_stiffness, backbone_EI=args.backbone_EI, preload=args.preload or 0.0
@@ -378,9 +374,27 @@ def _subject(args, command: str, needs=("wires", "length", "pitch_radius")):
             + ", ".join("--" + f.replace("_", "-") for f in missing)
             + " for one segment"
         )
-    return _design(
-        args, length=getattr(args, "length", None) or 20.0, pitch_radius=getattr(args, "pitch_radius", None) or 2.0
-    )
+    length, radius = getattr(args, "length", None), getattr(args, "pitch_radius", None)
+    return _design(args, length=20.0 if length is None else length, pitch_radius=2.0 if radius is None else radius)
+
+
+def _check_compliance_flags(args) -> None:
+    """``--compliance`` needs a load, and the stiffnesses from the flags (``--wires``) or the file
+    (``--design``, which then sets them); the statics flags go with it only."""
+    stiff = ("wire_stiffness", "backbone_EI", "preload")
+    if not args.compliance:
+        if any(getattr(args, f) is not None for f in (*stiff, "load")):
+            raise CLIError("--wire-stiffness, --backbone-EI, --load and --preload go with --compliance")
+        return
+    if args.design is not None:
+        given = [f for f in stiff if getattr(args, f) is not None]
+        if given:
+            flags = ", ".join("--" + f.replace("_", "-") for f in given)
+            raise CLIError(f"{flags}: the --design file sets the robot's stiffness and preload")
+    needed = ("load",) if args.design is not None else ("wire_stiffness", "backbone_EI", "load")
+    missing = [f for f in needed if getattr(args, f) is None]
+    if missing:
+        raise CLIError("--compliance needs " + ", ".join("--" + m.replace("_", "-") for m in missing))
 
 
 def _sweep_subject(args):
@@ -403,17 +417,22 @@ def _sweep_subject(args):
 DEFAULT_SAMPLES = 1 << 16
 
 
+def _robot_with_compliance(robot, B, dq, wrench):
+    """A robot's kinematic measures and its tension-only statics in one per-configuration function."""
+    from .analysis import config_metrics
+    from .model import config_compliance
+
+    return {**config_metrics(robot, B, dq), **config_compliance(robot, B, wrench)}
+
+
 def _sweep_robot(args, robot, out) -> None:
     """``sweep`` of a robot of several segments: its kinematic measures, full and reduced
     (:func:`~tension_zones.analysis.config_metrics`), on Halton samples of its configurations."""
     from ._io import atomic_path
     from .analysis import config_metrics, config_samples, sweep_configs
+    from .model._statics import as_wrench
 
     S = robot.n_segments
-    if args.compliance:
-        raise CLIError(
-            f"--compliance takes a one-segment design; a robot of {S} segments sweeps its kinematic measures"
-        )
     if args.theta_step is not None or args.delta_step is not None:
         raise CLIError(
             f"--theta-step and --delta-step are one segment's grid; a robot of {S} segments takes "
@@ -428,7 +447,11 @@ def _sweep_robot(args, robot, out) -> None:
     if np.ndim(args.dq) == 0:  # (a calibrated file's play per wire is checked when it is read)
         _positive("--dq", args.dq)
     B = config_samples(S, n, max_bend)
-    res = sweep_configs(config_metrics, robot, B, args.dq, quiet=args.quiet, desc=f"sweep ({S} segments)")
+    fn: Callable = config_metrics
+    extra: tuple = (args.dq,)
+    if args.compliance:
+        fn, extra = _robot_with_compliance, (args.dq, as_wrench(_load_arg(args.load)))
+    res = sweep_configs(fn, robot, B, *extra, quiet=args.quiet, desc=f"sweep ({S} segments)")
     with atomic_path(out) as tmp:
         np.savez(tmp, B=B, bend_deg=np.degrees(np.linalg.norm(B, axis=-1)), **res)  # type: ignore[arg-type]
     if not args.quiet:
@@ -481,7 +504,8 @@ def _add_sweep_parser(sub) -> None:
     c.add_argument(
         "--compliance",
         action="store_true",
-        help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible",
+        help="add deflection_mm_MODE, deflection_deg_MODE, tensions, n_taut_statics, feasible "
+        "(a --design file gives the stiffnesses and preload)",
     )
     c.add_argument("--wire-stiffness", type=float, help="k_w (N/mm)")
     c.add_argument("--backbone-EI", type=float, help="backbone bending stiffness EI (N mm^2)")

@@ -95,3 +95,42 @@ def measures(lengths, route_angles, route_radii, crosses, B, dq):
         out[f"dp_max_{mode}"] = np.max(np.linalg.norm(J[:3] @ box, axis=0))
         out[f"dw_max_{mode}"] = np.max(np.linalg.norm(J[3:] @ box, axis=0))
     return out
+
+
+def compliance(lengths, EI, route_angles, route_radii, crosses, k_w, preload, B, w, h=1e-4):
+    """Deflections of ``config_compliance`` by an independent route: tensions by SciPy's SLSQP on
+    ``min ||tau||^2, A tau = rhs, tau >= preload``, the load term by central differences of
+    ``J_xB^T w``, and ``numpy.linalg.solve``."""
+    from scipy.optimize import minimize
+
+    B = np.asarray(B, float)
+    S = len(lengths)
+    Jq = routing(route_angles, route_radii, crosses)
+    Jx = J_xB(lengths, B)
+    rhs = Jx.T @ w - (np.repeat(np.asarray(EI) / np.asarray(lengths), 2) * B.ravel())
+    A = Jq.T
+    res = minimize(
+        lambda t: t @ t,
+        np.maximum(np.linalg.lstsq(A, rhs, rcond=None)[0], preload),
+        jac=lambda t: 2 * t,
+        bounds=[(p, None) for p in preload],
+        constraints=[{"type": "eq", "fun": lambda t: A @ t - rhs, "jac": lambda t: A}],
+        method="SLSQP",
+        options={"ftol": 1e-16, "maxiter": 500},
+    )
+    tau = res.x
+    taut = (np.asarray(preload) > 0) | (tau > 1e-6 * tau.max())
+    load = np.zeros((2 * S, 2 * S))
+    for i in range(2 * S):
+        e = np.zeros(2 * S)
+        e[i] = h
+        plus, minus = J_xB(lengths, B + e.reshape(S, 2), h), J_xB(lengths, B - e.reshape(S, 2), h)
+        load[:, i] = (plus.T @ w - minus.T @ w) / (2 * h)
+    hess_U = np.diag(np.repeat(np.asarray(EI) / np.asarray(lengths), 2))
+    out = {"tensions": tau, "n_taut_statics": int(taut.sum())}
+    for mode, m in (("full", np.ones(len(tau))), ("reduced", taut.astype(float))):
+        K = hess_U - load + Jq.T @ ((np.asarray(k_w) * m)[:, None] * Jq)
+        dx = Jx @ np.linalg.solve(K, Jx.T @ w)
+        out[f"deflection_mm_{mode}"] = np.linalg.norm(dx[:3])
+        out[f"deflection_deg_{mode}"] = np.degrees(np.linalg.norm(dx[3:]))
+    return out

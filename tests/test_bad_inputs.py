@@ -345,9 +345,25 @@ CLI = [
         "--wires: the --design file sets the robot",
     ),
     (
-        "sweep-robot-compliance",
+        "sweep-robot-compliance-no-load",
         ["sweep", "--design", "{tmp}/ftdcr.json", "--compliance", "--out", "{tmp}/s.npz"],
-        "--compliance takes a one-segment design; a robot of 3 segments",
+        "--compliance needs --load",
+    ),
+    (
+        "sweep-design-compliance-preload",
+        [
+            "sweep",
+            "--design",
+            "{tmp}/ftdcr.json",
+            "--compliance",
+            "--load",
+            "1,0,0",
+            "--preload",
+            "2",
+            "--out",
+            "{tmp}/s.npz",
+        ],
+        "--preload: the --design file sets the robot's stiffness and preload",
     ),
     (
         "sweep-robot-theta-step",

@@ -9,11 +9,13 @@ import numpy as np
 import pytest
 from hypothesis import given
 from hypothesis import strategies as st
+from reference_chain import compliance as compliance_reference
 from reference_chain import measures
 
 import tension_zones as tz
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
 from tension_zones.model import Robot
+from tension_zones.model._chain_statics import config_compliance
 from tension_zones.model._chain_zones import crossing_wires, segment_tension_map
 from tension_zones.model._kinematics import psi_to_b
 
@@ -192,3 +194,54 @@ def test_a_segments_map_gives_the_robots_taut_wires(delta_deg, phi, other_dir, j
     wires = crossing_wires(rob, j)
     want = tuple(int(k) + 1 for k, w in enumerate(wires) if score[w - 1] > 1e-9)
     assert tmap.taut_at(delta_deg) == want
+
+
+# ------------------------------------------------------------------------------------------------
+# Tension-only statics and compliance of a robot
+# ------------------------------------------------------------------------------------------------
+STATIC_SEGMENTS = (
+    tz.Design(3, 30.0, 4.0, wire_stiffness=60.0, backbone_EI=3000.0),
+    tz.Design(4, 25.0, 3.0, wire_stiffness=80.0, backbone_EI=2000.0, preload=0.5),
+    tz.Design(3, 20.0, 2.5, backbone_EI=1500.0),
+)
+COMPLIANCE = jax.jit(config_compliance, static_argnames="general")
+WRENCHES = (np.array([2.0, -1.0, 0.5, 0.0, 0.0, 0.0]), np.array([0.5, 1.0, -1.0, 20.0, -10.0, 5.0]))
+
+
+@pytest.mark.parametrize("S", [2, 3])
+def test_a_robots_compliance_matches_a_scipy_qp_and_finite_differences(S):
+    rob = Robot(STATIC_SEGMENTS[:S])
+    rng = np.random.default_rng(S)
+    args = [np.asarray(x) for x in (rob.lengths, rob.backbone_EI, rob.route_angles, rob.route_radii, rob.crosses)]
+    args += [np.asarray(rob.wire_stiffness), np.asarray(rob.preload)]
+    for B, w in itertools.product([np.zeros((S, 2)), rng.uniform(-0.8, 0.8, (S, 2))], WRENCHES):
+        got, want = COMPLIANCE(rob, jnp.asarray(B), jnp.asarray(w)), compliance_reference(*args, B, w)
+        assert bool(got["feasible"])
+        for k, v in want.items():
+            np.testing.assert_allclose(np.asarray(got[k]), v, rtol=1e-6, atol=1e-6, err_msg=k)
+
+
+def test_a_one_segment_robots_compliance_is_the_segments():
+    rob = Robot(STATIC_SEGMENTS[0])
+    for (th, de), w in itertools.product([(1.2, 0.3), (0.9, 2.5), (0.3, 4.0)], WRENCHES):
+        B = psi_to_b(th, de)[None]
+        a, b = COMPLIANCE(rob, B, w, general=True), COMPLIANCE(rob, B, w)
+        for k in b:
+            np.testing.assert_allclose(np.asarray(a[k]), np.asarray(b[k]), rtol=1e-10, atol=1e-12, err_msg=k)
+
+
+def test_a_load_the_wires_cannot_hold_is_infeasible_and_nan():
+    """Wires bunched on one side of each segment cannot pull the other way: no deflection is made up."""
+    bunched = [tz.Design(3, 30.0, 3.0, wire_angles=np.radians([0, 10, 20])) for _ in range(2)]
+    out = COMPLIANCE(Robot(bunched), jnp.zeros((2, 2)), jnp.array([5.0, 0, 0, 0, 0, 0]))
+    assert not bool(out["feasible"]) and np.isnan(float(out["deflection_mm_reduced"]))
+
+
+def test_compliance_gradients_are_finite_at_the_straight_configuration_and_nan_gives_nan():
+    """With respect to every number of the robot (what a design optimiser varies), straight and bent."""
+    rob = Robot(STATIC_SEGMENTS[:2])
+    g = jax.jit(jax.grad(lambda B, r: config_compliance(r, B, WRENCHES[0])["deflection_mm_reduced"], argnums=1))
+    for B in (jnp.zeros((2, 2)), jnp.array([[0.0, 0.0], [0.4, -0.2]])):
+        assert all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g(B, rob)))
+    out = COMPLIANCE(rob, jnp.array([[np.nan, 0.0], [0.0, 0.0]]), WRENCHES[0])
+    assert int(out["n_taut_statics"]) == -1 and not bool(out["feasible"]) and np.isnan(float(out["deflection_mm_full"]))

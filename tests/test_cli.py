@@ -213,6 +213,19 @@ def test_sweep_takes_a_robot_of_two_segments_from_a_design_file(tmp_path):
         np.testing.assert_allclose(res[k][:5], np.asarray(v), rtol=1e-12, err_msg=k)
 
 
+def test_sweep_of_a_robot_with_compliance_takes_the_files_stiffness(tmp_path):
+    out = tmp_path / "two.npz"
+    design = tz.example_path("design/two_segments.design.json")
+    argv = ["sweep", "--design", str(design), "--samples", "64", "--compliance", "--load", "0,0,-0.5"]
+    main([*argv, "--out", str(out), "--quiet"])
+    res = np.load(out)
+    w = np.array([0.0, 0.0, -0.5, 0.0, 0.0, 0.0])
+    want = jax.jit(jax.vmap(tz.config_compliance, (None, 0, None)))(tz.Robot.from_json(design), res["B"][:3], w)
+    for k, v in want.items():
+        np.testing.assert_allclose(res[k][:3], np.asarray(v), rtol=1e-12, err_msg=k)
+    assert np.all(res["feasible"]) and np.all(res["deflection_mm_reduced"] > 0)
+
+
 def test_sweep_of_a_one_segment_design_file_is_the_segments_grid(tmp_path, capsys):
     a, b = tmp_path / "a.npz", tmp_path / "b.npz"
     design = tz.example_path("synthetic/nominal_3w.design.json")

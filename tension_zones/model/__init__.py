@@ -1,10 +1,13 @@
 """The model: a segment (:class:`Design`) and a robot of one or more segments (:class:`Robot`).
 
 Constant-curvature kinematics written once per segment (``_kinematics``) and chained (``_robot``);
-tension zones and masks (``_zones``); tension-only statics and compliance (``_statics``).
+tension zones and masks (``_zones``; a robot's segments: ``_chain_zones``); tension-only statics and
+compliance (``_statics``; a robot: ``_chain_statics``).
 """
 
 from .. import _config  # noqa: F401  (float64 before any array is made)
+from ._chain_statics import config_compliance
+from ._chain_zones import segment_tension_map
 from ._design import (
     DEFAULT_BACKBONE_EI,
     DEFAULT_WIRE_STIFFNESS,
@@ -98,6 +101,7 @@ __all__ = [
     "compliance_grid",
     "compliance_pose",
     "compliance_pose_jit",
+    "config_compliance",
     "energy",
     "equilibrium",
     "equilibrium_J_pq",
@@ -111,6 +115,7 @@ __all__ = [
     "read_json",
     "reduced_J_qpsi",
     "reduced_J_xq",
+    "segment_tension_map",
     "stiffness_b",
     "stiffness_psi",
     "taut_mask",
