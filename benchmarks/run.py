@@ -236,14 +236,17 @@ def machine():
     }
 
 
-def markdown(res) -> str:
+def machine_line(res) -> str:
     m = res["machine"]
-    out = [
+    return (
         f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
         f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`; load average at the "
-        f"start {m['load_average_1min']:.1f} (other work on the machine slows every column alike).",
-        "",
-    ]
+        f"start {m['load_average_1min']:.1f} (other work on the machine slows every column alike)."
+    )
+
+
+def markdown(res) -> str:
+    out = [machine_line(res), ""]
     if "kinematics" in res:  # --only may leave a section out
         out += [
             "### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)",
@@ -543,6 +546,56 @@ def markdown_explore(res) -> str:
     return "\n".join(out)
 
 
+def bench_robots(quick):
+    """Robots of one, two and three segments side by side: the kinematic measures (full and reduced,
+    exact bounds) per configuration, the one segment on its theta_L x delta grid and the robots on
+    Halton configurations; the three segments with the tension-only statics too."""
+    from tension_zones.analysis import config_metrics, config_samples, pose_metrics, sweep_configs, sweep_grid
+    from tension_zones.model import config_compliance
+
+    def with_statics(robot, B, dq, w):
+        return {**config_metrics(robot, B, dq), **config_compliance(robot, B, w)}
+
+    wrench = np.array([0.0, 0.0, -0.5, 0.0, 0.0, 0.0])
+    th, de = grid(1.0, 1.0) if quick else grid(0.5, 0.25)
+    seg = tz.Design(4, 20.0, 2.0)
+    cases = [
+        ("1 segment, 4 wires (grid)", th.size * de.size, lambda: sweep_grid(pose_metrics, seg, th, de, 0.4, quiet=True))
+    ]
+    for label, path, n, statics in (
+        ("2 segments, 3 + 3 wires", "design/two_segments.design.json", 1 << (13 if quick else 16), False),
+        ("3 segments, 3 x 3 wires (FTDCR v4)", "ftdcr_v4/design.json", 1 << (13 if quick else 16), False),
+        ("3 segments, 3 x 3 wires, with statics", "ftdcr_v4/design.json", 1 << (10 if quick else 12), True),
+    ):
+        robot = tz.Robot.from_json(tz.example_path(path))
+        B = config_samples(robot.n_segments, n, 90.0)
+        fn, extra = (with_statics, (0.4, wrench)) if statics else (config_metrics, (0.4,))
+        cases.append((label, n, lambda r=robot, B=B, fn=fn, extra=extra: sweep_configs(fn, r, B, *extra, quiet=True)))
+    firsts = [_seconds(run) for _, _, run in cases]
+    times: list[list[float]] = [[] for _ in cases]
+    for _ in range(2 if quick else 3):  # interleaved: every case once per repeat
+        for i, (_, _, run) in enumerate(cases):
+            times[i].append(_seconds(run))
+    rows = []
+    for (label, n, _), first, t in zip(cases, firsts, times):
+        med = statistics.median(t)
+        rows.append({"case": label, "configurations": n, "per_s": n / med, "compile_s": max(first - med, 0.0)})
+    return rows
+
+
+def markdown_robots(rows) -> str:
+    out = [
+        "| robot | configurations | configurations/s | compile (s) | target |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        target = ""
+        if r["case"].startswith("3 segments") and "statics" not in r["case"]:
+            target = f">= 5e+05/s: {'met' if r['per_s'] >= 5e5 else 'MISSED'}"
+        out.append(f"| {r['case']} | {r['configurations']:,} | {r['per_s']:.3g} | {r['compile_s']:.2f} | {target} |")
+    return "\n".join(out)
+
+
 SECTIONS = {
     "kinematics": bench_kinematics,
     "compliance": bench_compliance,
@@ -550,7 +603,10 @@ SECTIONS = {
     "calibration": bench_calibration,
     "optimiser": bench_optimiser,
     "explore": bench_explore,
+    "robots": bench_robots,
 }
+#: Sections with a block of their own in benchmarks/README.md (the others share RESULTS).
+OWN_BLOCK = {"robots": ("ROBOTS", "Robots of several segments: measures per configuration", markdown_robots)}
 
 
 def main(argv=None):
@@ -560,7 +616,8 @@ def main(argv=None):
     p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
     p.add_argument("--only", nargs="*", choices=sorted(SECTIONS), help="run only these sections")
     args = p.parse_args(argv)
-    res = {"machine": machine(), "command": "python benchmarks/run.py" + (" --quick" if args.quick else "")}
+    command = "python benchmarks/run.py" + (" --quick" if args.quick else "")
+    res = {"machine": machine(), "command": command + (f" --only {' '.join(args.only)}" if args.only else "")}
     for name, fn in SECTIONS.items():
         if args.only and name not in args.only:
             continue
@@ -569,12 +626,21 @@ def main(argv=None):
         print(json.dumps(res[name], indent=1, default=float), flush=True)
     if "scaling" in res:
         plot_scaling(res["scaling"], HERE / "scaling.png")
-    md = markdown(res)
-    print(md)
+    from _readme import write_section
+
+    for name, (block, title, render) in OWN_BLOCK.items():
+        if name in res:
+            md_own = f"{machine_line(res)}\n\n{render(res[name])}"
+            print(md_own)
+            if not args.no_readme:
+                write_section(block, md_own, title)
+    if any(name in res for name in SECTIONS if name not in OWN_BLOCK):
+        md = markdown(res)
+        print(md)
+        if not args.no_readme:
+            write_readme(md)
     if args.json:
         Path(args.json).write_text(json.dumps(res, indent=2, default=float))
-    if not args.no_readme:
-        write_readme(md)
 
 
 if __name__ == "__main__":
