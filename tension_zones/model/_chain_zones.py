@@ -79,7 +79,7 @@ def segment_tension_map(robot: Robot, j: int, B=None, still=None) -> TensionMap:
     wires, r, a, c, s = _terms(robot, j, B, still)
     # pulled in where cos(a + delta) > rho: an arc of half-width arccos(rho) about delta = -a; its ends
     # (a zero pull rate) are decided by the boundary rule, as a segment's
-    # (a wire the rule never counts taut, r + c <= 1e-9 s, has no zone; one it always does, all of them)
+    # (a wire the rule never counts taut, r + c <= 1e-9 * s_k, has no zone; one it always does, all of them)
     rho, rule_rho = -c / r, (BOUNDARY_TOL * s - c) / r
     centre = np.mod(-np.degrees(a), 360.0)
     half = np.degrees(np.arccos(np.clip(rho, -1.0, 1.0)))
