@@ -245,3 +245,15 @@ def test_compliance_gradients_are_finite_at_the_straight_configuration_and_nan_g
         assert all(bool(jnp.all(jnp.isfinite(x))) for x in jax.tree_util.tree_leaves(g(B, rob)))
     out = COMPLIANCE(rob, jnp.array([[np.nan, 0.0], [0.0, 0.0]]), WRENCHES[0])
     assert int(out["n_taut_statics"]) == -1 and not bool(out["feasible"]) and np.isnan(float(out["deflection_mm_full"]))
+
+
+def test_a_robots_sweep_compiles_once_per_structure():
+    """Two robots of the same wire counts with other numbers, and other configurations: one program."""
+    from tension_zones.analysis import compiled_chunk_count, config_samples, sweep_configs
+
+    a = Robot(SEGMENTS[:2])
+    b = Robot([s.replace(pitch_radius=s.pitch_radius * 1.2, length=s.length * 0.9) for s in SEGMENTS[:2]])
+    sweep_configs(config_metrics, a, config_samples(2, 100, 60.0), 0.4, chunk_size=64, quiet=True)
+    before = compiled_chunk_count()
+    out = sweep_configs(config_metrics, b, config_samples(2, 150, 80.0, start=500), 0.7, chunk_size=64, quiet=True)
+    assert compiled_chunk_count() == before and out["dp_max_reduced"].shape == (150,)
