@@ -18,6 +18,10 @@ scale-free. So the package keeps this one solver and does not depend on jaxopt.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
 import jax
 import jax.numpy as jnp
 
@@ -96,6 +100,47 @@ def levenberg_marquardt(
     active set 19 passes and 0.0833 mm).
     """
     theta0 = jnp.asarray(theta0)
+    pr, warm, K0 = _problem(fun, theta0, free, weights, huber, lo, hi, max_iter, tol, rows, cols, state, n_cols)
+    th, cost, it, r, J = _solve(pr, _init(pr, theta0, warm))
+    return th, cost, it, r, J[..., :K0]
+
+
+class _Problem(NamedTuple):
+    """What every pass of :func:`levenberg_marquardt` shares: the model, the weights and bounds, and the
+    Jacobian's columns (``K`` of them, whole groups of ``COL_GROUP``)."""
+
+    res: Callable  # (theta (P,), warm) -> (residuals (M, d), warm)
+    shape: tuple  # the residuals' (M, d)
+    w: jax.Array  # (M,) row weights
+    huber: Any  # Huber threshold (``inf``: least squares)
+    lo: jax.Array  # (P,) lower bounds
+    hi: jax.Array  # (P,) upper bounds
+    cols: jax.Array  # (K,) the parameter of each differentiated column
+    basis: jax.Array  # (K, P) the tangents pushed forward
+    freeb: jax.Array  # (K,) bool: the free columns, each once
+    eye: jax.Array  # (K, K)
+    groups: Any  # groups of columns pushed forward (may be traced)
+    max_iter: Any
+    tol: Any
+
+
+class _State(NamedTuple):
+    """The loop's state: the accepted point, the candidate evaluated next and the damping."""
+
+    theta: jax.Array  # (P,) the accepted parameters
+    r: jax.Array  # (M, d) their residuals
+    J: jax.Array  # (M, d, K) their Jacobian's columns
+    cost: jax.Array  # () their cost
+    cand: jax.Array  # (P,) the candidate
+    lam: jax.Array  # () Marquardt's damping
+    it: Any  # () passes so far
+    done: Any  # () bool: nothing left to try
+    warm: Any  # the model's warm-start state at ``theta``
+
+
+def _problem(fun, theta0, free, weights, huber, lo, hi, max_iter, tol, rows, cols, state, n_cols):
+    """:func:`levenberg_marquardt`'s arguments as a :class:`_Problem`, with the warm start (``()``
+    without one) and ``K0``, the number of columns asked for (``theta0`` a JAX array)."""
     P = theta0.shape[0]
     free = jnp.ones(P, theta0.dtype) if free is None else jnp.asarray(free, theta0.dtype)
     cols = jnp.arange(P) if cols is None else jnp.asarray(cols)
@@ -109,85 +154,101 @@ def levenberg_marquardt(
     eye = jnp.eye(K, dtype=theta0.dtype)
     lo = jnp.broadcast_to(jnp.asarray(lo, theta0.dtype), (P,))
     hi = jnp.broadcast_to(jnp.asarray(hi, theta0.dtype), (P,))
-
     if state is None:  # no warm start: an empty state
         state, plain = (), fun
         fun = lambda th, s: (plain(th), s)
-
-    def res(th, s):
-        r, s = fun(th, s)
-        return (r[:, None] if r.ndim == 1 else r), s
-
+    res = functools.partial(_as_rows, fun)
     groups = (n_cols + COL_GROUP - 1) // COL_GROUP
+    shape = jax.eval_shape(res, theta0, state)[0].shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
+    w = jnp.ones(shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
+    return _Problem(res, shape, w, huber, lo, hi, cols, basis, freeb, eye, groups, max_iter, tol), state, K0
 
-    def res_jac(th, s):
-        # linearised once (the model is traced and compiled once, its primal run once), then pushed
-        # forward a group of columns at a time, only the groups that hold the wanted ones (a loop
-        # with a traced count: the column count is data, not shape); the state is the primal's
-        s = jax.lax.stop_gradient(s)
-        r, lin, s = jax.linearize(lambda t: res(t, s), th, has_aux=True)
 
-        def group(j, J):
-            V = jax.lax.dynamic_slice_in_dim(basis, j * COL_GROUP, COL_GROUP)  # (G, P)
-            return jax.lax.dynamic_update_slice_in_dim(
-                J, jnp.moveaxis(jax.vmap(lin)(V), 0, -1), j * COL_GROUP, axis=J.ndim - 1
-            )
+def _as_rows(fun, th, s):
+    """``fun``'s residuals as rows (M, d) (a (M,) result as (M, 1)) and its warm state."""
+    r, s = fun(th, s)
+    return (r[:, None] if r.ndim == 1 else r), s
 
-        return r, jax.lax.fori_loop(0, groups, group, jnp.zeros(r.shape + (K,), r.dtype)), s
 
-    r_shape = (
-        jax.eval_shape(res, theta0, state)[0].shape if rows is None else (rows[0], rows[1] if len(rows) > 1 else 1)
-    )
-    w = jnp.ones(r_shape[0], theta0.dtype) if weights is None else jnp.asarray(weights, theta0.dtype)
+def _res_jac(pr: _Problem, th, s):
+    """Residuals (M, d), Jacobian columns (M, d, K) and warm state at ``th``: the model linearised once
+    (traced and compiled once, its primal run once), then pushed forward a group of columns at a
+    time, only the groups that hold the wanted ones (a loop with a traced count: the column count is
+    data, not shape); the state is the primal's."""
+    s = jax.lax.stop_gradient(s)
+    r, lin, s = jax.linearize(lambda t: pr.res(t, s), th, has_aux=True)
 
-    def propose(th, r, J, lam):
-        sw = w * huber_weights(r, huber)
-        g = jnp.einsum("nip,ni,n->p", J, r, sw)
-        # a parameter on a bound that the gradient pushes outward stays there: without it in the
-        # step, the others' step is the constrained one (not a clipped unconstrained one)
-        at_lo, at_hi = th[cols] <= lo[cols], th[cols] >= hi[cols]
-        fb = freeb & ~((at_lo & (g > 0)) | (at_hi & (g < 0)))
-        J = J * fb
-        A = jnp.einsum("nip,niq,n->pq", J, J, sw)
-        d = jnp.diag(A)
-        d = jnp.maximum(d, 1e-12 * jnp.max(d) + 1e-300)
-        A = jnp.where(fb[:, None] & fb[None, :], A + lam * jnp.diag(d), eye)
-        step = -jnp.linalg.solve(A, jnp.where(fb, g, 0.0))
-        return jnp.clip(th + jnp.zeros(P, th.dtype).at[cols].add(jnp.where(fb, step, 0.0)), lo, hi)
+    def group(j, J):
+        V = jax.lax.dynamic_slice_in_dim(pr.basis, j * COL_GROUP, COL_GROUP)  # (G, P)
+        return jax.lax.dynamic_update_slice_in_dim(
+            J, jnp.moveaxis(jax.vmap(lin)(V), 0, -1), j * COL_GROUP, axis=J.ndim - 1
+        )
 
-    # One model evaluation per pass (a single copy of the model in the compiled program): evaluate
-    # the candidate, accept it if it lowers the cost (the first pass always does), propose the next.
-    def body(carry):
-        th, r, J, cost, cand, lam, it, _, s = carry
-        r_c, J_c, s_c = res_jac(cand, s)
-        cost_c = huber_cost(r_c, w, huber)
-        ok = cost_c < cost
-        ok = ok | (it == 0)
-        rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
-        done = (ok & (it > 0) & (rel < tol)) | (lam > 1e12)
-        th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
-        s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), s_c, s)
-        cost = jnp.where(ok, cost_c, cost)
-        lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
-        cand = propose(th, r, J, lam)
-        # no parameter can move (each free one held on its bound): nothing left to try
-        return th, r, J, cost, cand, lam, it + 1, done | jnp.all(cand == th), s
+    return r, jax.lax.fori_loop(0, pr.groups, group, jnp.zeros(r.shape + (pr.cols.shape[0],), r.dtype)), s
 
-    def cond(carry):
-        return (carry[6] <= max_iter) & ~carry[7]
 
+def _propose(pr: _Problem, th, r, J, lam):
+    """The next candidate (P,) from ``th`` (residuals ``r``, Jacobian ``J``): Marquardt's damped step
+    over the free columns, those on a bound that the gradient pushes outward held there (without them
+    the others' step is the constrained one, not a clipped unconstrained one), projected on the box."""
+    cols, lo, hi = pr.cols, pr.lo, pr.hi
+    sw = pr.w * huber_weights(r, pr.huber)
+    g = jnp.einsum("nip,ni,n->p", J, r, sw)
+    at_lo, at_hi = th[cols] <= lo[cols], th[cols] >= hi[cols]
+    fb = pr.freeb & ~((at_lo & (g > 0)) | (at_hi & (g < 0)))
+    J = J * fb
+    A = jnp.einsum("nip,niq,n->pq", J, J, sw)
+    d = jnp.diag(A)
+    d = jnp.maximum(d, 1e-12 * jnp.max(d) + 1e-300)
+    A = jnp.where(fb[:, None] & fb[None, :], A + lam * jnp.diag(d), pr.eye)
+    step = -jnp.linalg.solve(A, jnp.where(fb, g, 0.0))
+    return jnp.clip(th + jnp.zeros(th.shape[0], th.dtype).at[cols].add(jnp.where(fb, step, 0.0)), lo, hi)
+
+
+def _init(pr: _Problem, theta0, warm) -> _State:
+    """The state before the first pass: the start (clipped to the box) is the first candidate."""
     dt = theta0.dtype
-    start = jnp.clip(theta0, lo, hi)
-    carry = (
+    start = jnp.clip(theta0, pr.lo, pr.hi)
+    K = pr.cols.shape[0]
+    zero = jnp.zeros(pr.shape, dt)
+    return _State(
         start,
-        jnp.zeros(r_shape, dt),
-        jnp.zeros(r_shape + (K,), dt),
+        zero,
+        jnp.zeros(pr.shape + (K,), dt),
         jnp.asarray(jnp.inf, dt),
         start,
         jnp.asarray(1e-3, dt),
         0,
         False,
-        state,
+        warm,
     )
-    th, r, J, cost, _, _, it, _, _ = jax.lax.while_loop(cond, body, carry)
-    return th, cost, it, r, J[..., :K0]
+
+
+def _step(pr: _Problem, st: _State) -> _State:
+    """One pass, one model evaluation: evaluate the candidate, accept it if it lowers the cost (the
+    first pass always does), adapt the damping, propose the next candidate."""
+    th, r, J, cost, cand, lam, it, _, s = st
+    r_c, J_c, s_c = _res_jac(pr, cand, s)
+    cost_c = huber_cost(r_c, pr.w, pr.huber)
+    ok = cost_c < cost
+    ok = ok | (it == 0)
+    rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
+    done = (ok & (it > 0) & (rel < pr.tol)) | (lam > 1e12)
+    th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
+    s = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), s_c, s)
+    cost = jnp.where(ok, cost_c, cost)
+    lam = jnp.where(it == 0, lam, jnp.where(ok, lam / 3.0, lam * 4.0))
+    cand = _propose(pr, th, r, J, lam)
+    # no parameter can move (each free one held on its bound): nothing left to try
+    return _State(th, r, J, cost, cand, lam, it + 1, done | jnp.all(cand == th), s)
+
+
+def _running(pr: _Problem, st: _State):
+    """Whether another pass is due: within the iteration limit and not done."""
+    return (st.it <= pr.max_iter) & ~st.done
+
+
+def _solve(pr: _Problem, st: _State) -> tuple:
+    """Passes until done: ``(theta, cost, iterations, residuals, Jacobian)`` at the result."""
+    st = jax.lax.while_loop(functools.partial(_running, pr), functools.partial(_step, pr), st)
+    return st.theta, st.cost, st.it, st.r, st.J

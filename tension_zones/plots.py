@@ -76,48 +76,86 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
     n = tmap.n_wires
     many = n > LABEL_MAX_WIRES
     ring0, ring_w = 1.08, (0.09 if not many else 1.1 / n)  # the ring band stays within ~1.1
-    ring_step = 1 if not many else math.ceil(n / LABEL_MAX_WIRES)
     sectors = list(tmap.sectors)
     present = sorted({s.n_taut for s in sectors if s.width_deg > 0}) or [0]
-    first, last = sectors[0], sectors[-1]
-    if len(sectors) > 1 and first.width_deg > 0 and last.width_deg > 0 and first.wires == last.wires:
-        # the table splits the sector through 0 deg; draw it whole
-        sectors = [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
+    sectors = _whole_sectors(sectors)
     for s in sectors:
         if s.width_deg > 0:
-            ax.add_patch(
-                Wedge(
-                    (0, 0),
-                    1.0,
-                    s.start_deg,
-                    s.end_deg,
-                    fc=_count_colour(s.n_taut, present),
-                    ec="white",
-                    lw=1.0 if not many else 0.4,
-                )
-            )
-            mid = np.radians(0.5 * (s.start_deg + s.end_deg))
-            rad = 0.62 if s.width_deg > 25 else 0.8
-            if not many:
-                label = ",".join(map(str, s.wires)) or "none"
-            elif s.width_deg >= 20:
-                label = f"{s.n_taut}"
-            else:
-                continue
-            ax.text(rad * np.cos(mid), rad * np.sin(mid), label, ha="center", va="center", fontsize=9)
+            _draw_sector(ax, s, present, many)
         else:
-            a = np.radians(s.start_deg)
-            ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2 if not many else 0.5)
-            if not many:
-                ax.text(
-                    1.0 * np.cos(a) * 0.45,
-                    1.0 * np.sin(a) * 0.45,
-                    f"{s.n_taut}",
-                    fontsize=8,
-                    ha="center",
-                    va="center",
-                    bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": "k", "lw": 0.6},
-                )
+            _draw_ray(ax, s, many)
+    _draw_zones(ax, tmap, ring0, ring_w, many)
+    r_max = ring0 + (n + 1) * ring_w
+    _draw_angle_ticks(ax, r_max)
+    ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
+    _draw_count_legend(ax, present, any(s.width_deg == 0 for s in sectors), many)
+    lim = r_max + 0.3
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    if title is None:
+        title = f"Tension map, {n} wires"
+        if tmap.phase_deg:
+            title += f" (zones shifted {tmap.phase_deg:.1f}° by δ̇)"
+    ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone", fontsize=10)
+    return ax
+
+
+def _whole_sectors(sectors: list) -> list:
+    """The map's sectors with the one through 0 deg whole (the table splits it in two)."""
+    first, last = sectors[0], sectors[-1]
+    if len(sectors) > 1 and first.width_deg > 0 and last.width_deg > 0 and first.wires == last.wires:
+        return [type(first)(last.start_deg, first.end_deg + 360.0, first.wires)] + sectors[1:-1]
+    return sectors
+
+
+def _draw_sector(ax, s, present, many: bool) -> None:
+    """A sector of constant taut set: a wedge of the inner disk shaded by its taut count (``present``:
+    the counts the map has), labelled with its wires (``many``: with its count, where wide enough)."""
+    ax.add_patch(
+        Wedge(
+            (0, 0),
+            1.0,
+            s.start_deg,
+            s.end_deg,
+            fc=_count_colour(s.n_taut, present),
+            ec="white",
+            lw=1.0 if not many else 0.4,
+        )
+    )
+    mid = np.radians(0.5 * (s.start_deg + s.end_deg))
+    rad = 0.62 if s.width_deg > 25 else 0.8
+    if not many:
+        label = ",".join(map(str, s.wires)) or "none"
+    elif s.width_deg >= 20:
+        label = f"{s.n_taut}"
+    else:
+        return
+    ax.text(rad * np.cos(mid), rad * np.sin(mid), label, ha="center", va="center", fontsize=9)
+
+
+def _draw_ray(ax, s, many: bool) -> None:
+    """A point sector (one direction): a dashed ray, its taut count circled (not with ``many`` wires)."""
+    a = np.radians(s.start_deg)
+    ax.plot([0, np.cos(a)], [0, np.sin(a)], ls="--", color="k", lw=1.2 if not many else 0.5)
+    if not many:
+        ax.text(
+            1.0 * np.cos(a) * 0.45,
+            1.0 * np.sin(a) * 0.45,
+            f"{s.n_taut}",
+            fontsize=8,
+            ha="center",
+            va="center",
+            bbox={"boxstyle": "circle,pad=0.15", "fc": "white", "ec": "k", "lw": 0.6},
+        )
+
+
+def _draw_zones(ax, tmap: TensionMap, ring0: float, ring_w: float, many: bool) -> None:
+    """Each wire's zone as a ring of width ``ring_w`` outside radius ``ring0`` (wire 1 innermost),
+    numbered (with ``many`` wires, every few)."""
+    n = tmap.n_wires
+    ring_step = 1 if not many else math.ceil(n / LABEL_MAX_WIRES)
     for k, (a, b) in enumerate(tmap.zones_deg):
         r_out = ring0 + (k + 1) * ring_w
         ax.add_patch(Wedge((0, 0), r_out, a, b, width=ring_w * 0.8, fc=_wire_colour(k, n), ec="none", alpha=0.85))
@@ -134,7 +172,10 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
                 color="white" if not many else "k",
                 fontweight="bold",
             )
-    r_max = ring0 + (n + 1) * ring_w
+
+
+def _draw_angle_ticks(ax, r_max: float) -> None:
+    """Ticks and labels of the bending-plane angle every 30 deg outside radius ``r_max``."""
     for deg in range(0, 360, 30):
         a = np.radians(deg)
         ax.plot(
@@ -152,26 +193,17 @@ def plot_tension_map(tmap: TensionMap, ax=None, title: str | None = None):
             fontsize=8,
             color="0.3",
         )
-    ax.add_patch(plt.Circle((0, 0), 1.0, fill=False, color="0.2", lw=0.8))
-    # a legend of at most eight entries
+
+
+def _draw_count_legend(ax, present, rays: bool, many: bool) -> None:
+    """A legend of the taut counts (at most eight entries), and of the rays where the map has any."""
     counts = present if len(present) <= 8 else present[:: math.ceil(len(present) / 8)]
     handles: list = [plt.Rectangle((0, 0), 1, 1, fc=_count_colour(k, present)) for k in counts]
     labels = [f"{k} taut" for k in counts]
-    if any(s.width_deg == 0 for s in sectors):
+    if rays:
         handles.append(plt.Line2D([], [], ls="--", color="k"))
         labels.append("single direction" + (" (circled: taut count)" if not many else ""))
     ax.legend(handles, labels, loc="lower left", fontsize=8, frameon=False, bbox_to_anchor=(-0.05, -0.08))
-    lim = r_max + 0.3
-    ax.set_xlim(-lim, lim)
-    ax.set_ylim(-lim, lim)
-    ax.set_aspect("equal")
-    ax.axis("off")
-    if title is None:
-        title = f"Tension map, {n} wires"
-        if tmap.phase_deg:
-            title += f" (zones shifted {tmap.phase_deg:.1f}° by δ̇)"
-    ax.set_title(title + "\nbending-plane angle δ; inner: taut wires; rings: each wire's zone", fontsize=10)
-    return ax
 
 
 def plot_tradeoff(result: dict, path):

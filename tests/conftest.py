@@ -107,6 +107,14 @@ def rng():
     return np.random.default_rng(0)
 
 
+def two_segments(preload: float = 0.0) -> tz.Robot:
+    """A two-segment robot: 3 wires evenly spaced, then 4 at uneven angles, ``preload`` (N) on each."""
+    proximal = tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=preload)
+    angles = np.radians([10, 100, 190, 280])
+    distal = tz.Design(4, 50.0, 2.5, angles, backbone_EI=1500.0, wire_stiffness=60.0, preload=preload)
+    return tz.Robot([proximal, distal])
+
+
 def omega_jacobian(fn_R, x):
     """Columns vee(dR/dx_i R^T) for a rotation-valued fn of a vector x."""
     R = fn_R(x)

@@ -4,10 +4,10 @@ its derivatives where the score test takes them, and the calibration model's mem
 import jax
 import jax.numpy as jnp
 import numpy as np
+from conftest import two_segments
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-import tension_zones as tz
 from tension_zones.calibration import Dataset, Problem, RobotModel, compilations
 from tension_zones.calibration.effects import library, nominal
 from tension_zones.model._equilibrium import bending_memory
@@ -80,20 +80,7 @@ def test_a_large_friction_keeps_the_shape_until_the_recording_restarts():
     np.testing.assert_allclose(out[3:], np.repeat(X[3:4], 3, 0), atol=1e-12)
 
 
-TWO = tz.Robot(
-    [
-        tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=0.0),
-        tz.Design(
-            4,
-            50.0,
-            2.5,
-            wire_angles=np.radians([10, 100, 190, 280]),
-            backbone_EI=1500.0,
-            wire_stiffness=60.0,
-            preload=0.0,
-        ),
-    ]
-)
+TWO = two_segments(preload=0.0)
 
 
 def _pulls(n_wires, steps=6):

@@ -5,6 +5,7 @@ import dataclasses
 import jax
 import jax.numpy as jnp
 import numpy as np
+from conftest import two_segments
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -15,20 +16,7 @@ from tension_zones.calibration._problem import predict_theta
 from tension_zones.calibration.effects import ALL, BY_NAME, library, nominal, play
 
 D3 = tz.Design(3, 20.0, 2.0, wire_stiffness=75.0, backbone_EI=1200.0, preload=2.0)
-TWO = tz.Robot(
-    [
-        tz.Design(3, 40.0, 3.0, backbone_EI=2000.0, wire_stiffness=40.0, preload=1.0),
-        tz.Design(
-            4,
-            50.0,
-            2.5,
-            wire_angles=np.radians([10, 100, 190, 280]),
-            backbone_EI=1500.0,
-            wire_stiffness=60.0,
-            preload=1.0,
-        ),
-    ]
-)
+TWO = two_segments(preload=1.0)
 
 
 def reference_play(q, c, reset):

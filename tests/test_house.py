@@ -297,3 +297,34 @@ def test_readmes_are_short_front_doors():
     limits.update({p: 10 * 1024 for p in (ROOT / "tension_zones").rglob("README.md")})
     over = [f"{p.relative_to(ROOT)}: {p.stat().st_size} bytes" for p, n in limits.items() if p.stat().st_size > n]
     assert over == []
+
+
+#: The most lines a function of the package may span, its docstring and nested functions included.
+MAX_FUNCTION_LINES = 100
+
+
+def _function_lengths(folder: Path) -> list[tuple[int, str]]:
+    """``(lines, "file:line name")`` of every function and method under ``folder``, nested ones too."""
+    import ast
+
+    out = []
+    for path in sorted(folder.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                out.append(
+                    (node.end_lineno - node.lineno + 1, f"{path.relative_to(folder.parent)}:{node.lineno} {node.name}")
+                )
+    return out
+
+
+def test_no_function_over_a_hundred_lines(tmp_path):
+    """Every function in the package spans at most ``MAX_FUNCTION_LINES`` lines; the count finds a
+    long one, nested in another, where there is one."""
+    long = sorted(f for f in _function_lengths(ROOT / "tension_zones") if f[0] > MAX_FUNCTION_LINES)
+    assert long == []
+    body = "".join(f"        x = {k}\n" for k in range(MAX_FUNCTION_LINES))
+    (tmp_path / "m.py").write_text(f"def outer():\n    def inner():\n{body}")
+    assert sorted(_function_lengths(tmp_path))[-2:] == [
+        (MAX_FUNCTION_LINES + 1, f"{tmp_path.name}/m.py:2 inner"),
+        (MAX_FUNCTION_LINES + 2, f"{tmp_path.name}/m.py:1 outer"),
+    ]

@@ -494,6 +494,31 @@ def _resumed(done, n_designs: int, D: int, S: int) -> tuple[np.ndarray, np.ndarr
     return results, is_done
 
 
+def _placement(dt, th, de, D: int, P: int, args) -> tuple:
+    """Where the chunks run: the mesh of the process's local devices, a chunk's ``D`` designs padded to
+    split evenly over them, the sharding that splits them, and what every chunk shares (the grid's
+    axes ``th``, ``de`` padded to whole chunks of ``P`` poses, their sizes, ``args``), on every device."""
+    idx_t = np.int64 if th.size * de.size + P >= 2**31 else np.int32
+    axes = _pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt)
+    mesh = Mesh(np.array(jax.local_devices()), ("designs",))
+    padded = mesh.size * -(-D // mesh.size)
+    split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
+    shared = jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), whole)
+    return mesh, padded, split, shared
+
+
+def _in_flight(n_rounds: int, launch: Callable, collect: Callable) -> None:
+    """``launch(k)`` for every round ``k``, at most :data:`IN_FLIGHT` at once, each one's result passed
+    to ``collect`` in order once that many are running (the rest at the end)."""
+    queue: collections.deque[tuple[int, Any]] = collections.deque()
+    for k in range(n_rounds):
+        queue.append(launch(k))
+        if len(queue) >= IN_FLIGHT:
+            collect(*queue.popleft())
+    while queue:
+        collect(*queue.popleft())
+
+
 def sweep_designs(
     fn: Callable,
     designs: Design,
@@ -557,13 +582,7 @@ def sweep_designs(
     mine = pending[jax.process_index() :: nproc]
     n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
 
-    dt = designs.dtype
-    idx_t = np.int64 if th.size * de.size + P >= 2**31 else np.int32
-    axes = _pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt)
-    mesh = Mesh(np.array(jax.local_devices()), ("designs",))
-    padded = mesh.size * -(-D // mesh.size)  # a chunk's D designs, padded to split evenly
-    split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
-    shared = jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), whole)
+    mesh, padded, split, shared = _placement(designs.dtype, th, de, D, P, args)
 
     def launch(k):  # this process's k-th chunk, dispatched asynchronously
         if k >= mine.size:
@@ -589,13 +608,7 @@ def sweep_designs(
     with _progress(
         n_designs, desc or "designs", quiet or not first or pending.size < 2, unit="design", initial=initial
     ) as bar:
-        queue: collections.deque[tuple[int, Any]] = collections.deque()
-        for k in range(n_rounds):
-            queue.append(launch(k))
-            if len(queue) >= IN_FLIGHT:
-                collect(*queue.popleft(), bar)
-        while queue:
-            collect(*queue.popleft(), bar)
+        _in_flight(n_rounds, launch, functools.partial(collect, bar=bar))
     if not first:
         return None
     return {name: results[:, j] for j, (name, _, _) in enumerate(stats)}

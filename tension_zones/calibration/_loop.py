@@ -64,6 +64,7 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -77,6 +78,7 @@ from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
 from ._register import GlobalRegistration, global_registration, kabsch, rotation_vector
+from ._rounds import BranchEnd, JointLook, LookAhead, Refit, Removal, Round
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -128,7 +130,7 @@ class Result:
     active: list
     effects: list
     candidates: list
-    rounds: list
+    rounds: list[Round]
     steps: list
     structure: dict
     rmse: dict
@@ -177,7 +179,7 @@ class Result:
             "nominal_parameters": list(self.nominal),
             "effects": self.effects,
             "candidates": self.candidates,
-            "rounds": self.rounds,
+            "rounds": [rd.to_dict() for rd in self.rounds],
             "steps": self.steps,
             "unexplained_structure": self.unexplained_structure,
             "structure": self.structure,
@@ -195,7 +197,7 @@ class Result:
             },
             "seconds": self.seconds,
         }
-        out["knife_edges"] = knife_edges(self.rounds)
+        out["knife_edges"] = knife_edges(out["rounds"])
         out["bound_warnings"] = bound_lines(
             self.at_bound, pb.describe(self.theta_after, self.active), pb.describe(self.theta_declared, self.active)
         )
@@ -220,7 +222,7 @@ class _Branch:
     active: list
     effects: list = dataclasses.field(default_factory=list)
     candidates: list = dataclasses.field(default_factory=list)
-    rounds: list = dataclasses.field(default_factory=list)
+    rounds: list[Round] = dataclasses.field(default_factory=list)
     models: list = dataclasses.field(default_factory=list)  # every accepted model, for the validation steps
     rnd: int = 0
     trail: list = dataclasses.field(default_factory=list)  # ``err`` after each round
@@ -228,9 +230,19 @@ class _Branch:
     #: the joint look's path: refits need not explain a share of the excess on their own (the module's
     #: docstring, step 4)
     relaxed: bool = False
-    #: the last round's, where it kept nothing but a refit passed every test but the share: the branch
-    #: before that round's record, its refits, the best of those, the round's record (the joint look's start)
-    shortfall: tuple | None = None
+    #: the last round's, where it kept nothing but a refit passed every test but the share (the joint
+    #: look's start)
+    shortfall: _Fork | None = None
+
+
+class _Fork(NamedTuple):
+    """Where another branch may go on from: a round's branch before its record, its refits, the one to
+    keep instead, and the round's record so far."""
+
+    before: _Branch
+    tried: list[Refit]
+    name: str
+    info: Round
 
 
 def final_parameters(pb: Problem, theta, active) -> dict:
@@ -312,7 +324,7 @@ class _Loop:
         # least the noise): structure the model lacks must not make a chance improvement look significant
         return max(float(np.mean(self.sigma**2)), e**2 / 3.0)
 
-    def one_round(self, st: _Branch, ties: list | None) -> bool:
+    def one_round(self, st: _Branch, ties: list[_Fork] | None) -> bool:
         """One round of the loop on branch ``st``: score, refit, keep the best, backward step.
         Returns whether an effect was kept (the loop goes on). A near tie is recorded in ``ties``
         (the look-ahead's start: the module's docstring, step 4)."""
@@ -325,23 +337,14 @@ class _Loop:
         chosen = self.screen(st, scores, r, z_crit)[:TRIES_PER_ROUND]
         tried = self.refit(st, chosen, r)
         m, unit = self.m, self.unit_of(st.err)
-        good = sorted((t for t in tried if t["significant"]), key=lambda t: t["err"])
-        info = {
-            "round": st.rnd,
-            "z_critical": z_crit,
-            "rmse_held_out_mm": st.plain,
-            "rmse_train_mm": rmse(r[self.train]),
-        }
-        short = sorted((t for t in tried if t["short_of_share"]), key=lambda t: t["err"])
+        good = sorted((t for t in tried if t.significant), key=lambda t: t.err)
+        info = Round(round=st.rnd, z_critical=z_crit, rmse_held_out_mm=st.plain, rmse_train_mm=rmse(r[self.train]))
+        short = sorted((t for t in tried if t.short_of_share), key=lambda t: t.err)
         if not good and short:  # the joint look may go on from here (step 4)
-            st.shortfall = (copy.deepcopy(st), copy.deepcopy(tried), short[0]["name"], info)
-        if (
-            ties is not None
-            and len(good) > 1
-            and (good[1]["err"] ** 2 - good[0]["err"] ** 2) * m / unit < self.resolution
-        ):
+            st.shortfall = _Fork(copy.deepcopy(st), copy.deepcopy(tried), short[0].name, info)
+        if ties is not None and len(good) > 1 and (good[1].err ** 2 - good[0].err ** 2) * m / unit < self.resolution:
             # the test cannot tell the two apart: the look-ahead may go on from the runner-up
-            ties.append((copy.deepcopy(st), copy.deepcopy(tried), good[1]["name"], info))
+            ties.append(_Fork(copy.deepcopy(st), copy.deepcopy(tried), good[1].name, info))
         return self.keep(st, tried, good[0] if good else None, info)
 
     def score(self, st: _Branch) -> tuple | None:
@@ -464,7 +467,7 @@ class _Loop:
             significant = sorted((s for s in significant if not s["screened_out"]), key=lambda s: s["screened_rmse_mm"])
         return significant
 
-    def refit(self, st: _Branch, chosen: list, r: np.ndarray) -> list:
+    def refit(self, st: _Branch, chosen: list, r: np.ndarray) -> list[Refit]:
         """The full refits of the ``chosen`` candidates on ``st``'s model and their tests (the module's
         docstring, step 3). Returns a record of each, with its parameters and decision error."""
         pb, sl, m, alpha, theta, active, err = self.pb, self.sl, self.m, self.alpha, st.theta, st.active, st.err
@@ -492,56 +495,41 @@ class _Loop:
                 and drop_train > need
                 and (not s.get("second_look") or share >= SECOND_LOOK_SHARE)
             )
-            extra = {}
+            drop_later = n_late = None
             if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
                 sse_with, sse_without, n_late = later[i]
-                extra = {"sse_drop_later": (sse_without - sse_with) / unit, "n_later": n_late}
-                tests = tests and extra["sse_drop_later"] > need
+                drop_later = (sse_without - sse_with) / unit
+                tests = tests and drop_later > need
             ok = tests and share >= share_needed
-            tried.append(
-                {
-                    "name": s["name"],
-                    "rmse_held_out_mm": plain_new,
-                    "rmse_train_mm": rmse(r_new[train]),
-                    "share_held_out": share,
-                    "share_needed": share_needed,
-                    "share_train": share_train,
-                    "sse_drop": drop,
-                    "sse_drop_train": drop_train,
-                    **extra,
-                    "needed": need,
-                    "significant": bool(ok),
-                    "short_of_share": bool(tests and not ok),
-                    "theta": th_new,
-                    "err": err_new,
-                    "score": s["score"],
-                }
-            )
+            refit = Refit(
+                name=s["name"], rmse_held_out_mm=plain_new, rmse_train_mm=rmse(r_new[train]),
+                share_held_out=share, share_needed=share_needed, share_train=share_train,
+                sse_drop=drop, sse_drop_train=drop_train, sse_drop_later=drop_later, n_later=n_late,
+                needed=need, significant=bool(ok), short_of_share=bool(tests and not ok),
+                theta=th_new, err=err_new, score=s["score"],
+            )  # fmt: skip
+            tried.append(refit)
             self.say(
                 f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
                 f"{' significant' if ok else ' short of the share' if tests else ''}"
             )
         return tried
 
-    def keep(self, st: _Branch, tried: list, accepted: dict | None, info: dict) -> bool:
+    def keep(self, st: _Branch, tried: list[Refit], accepted: Refit | None, info: Round) -> bool:
         """Keep the refit ``accepted`` (one of ``tried``, or None) in ``st``, then the backward step;
         record the round. Returns whether an effect was kept."""
         removed = []
         if accepted is not None:
-            st.theta, st.err, st.plain = accepted["theta"], accepted["err"], accepted["rmse_held_out_mm"]
-            st.active.append(accepted["name"])
+            st.theta, st.err, st.plain = accepted.theta, accepted.err, accepted.rmse_held_out_mm
+            st.active.append(accepted.name)
             st.effects.append(
-                {
-                    "name": accepted["name"],
-                    "rmse_after_mm": accepted["rmse_held_out_mm"],
-                    "score": accepted["score"],
-                }
+                {"name": accepted.name, "rmse_after_mm": accepted.rmse_held_out_mm, "score": accepted.score}
             )
-            self.say(f"  kept {accepted['name']}")
+            self.say(f"  kept {accepted.name}")
             # backward step: an earlier effect that only stood in for the one just added goes
             # (the refits without each earlier effect run at once; the first that passes is taken)
             sl = self.sl
-            earlier = [e for e in st.effects if e["name"] != accepted["name"]]
+            earlier = [e for e in st.effects if e["name"] != accepted.name]
             jobs = [
                 (_reset(st.theta, sl[e["name"]], self.pb.null), [a for a in st.active if a != e["name"]])
                 for e in earlier
@@ -553,20 +541,17 @@ class _Loop:
                 if rise < need:
                     st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
                     st.effects = [x for x in st.effects if x["name"] != e["name"]]
-                    removed.append({"name": e["name"], "rmse_held_out_mm": plain_wo, "sse_rise": rise, "needed": need})
+                    removed.append(Removal(name=e["name"], rmse_held_out_mm=plain_wo, sse_rise=rise, needed=need))
                     self.say(f"  removed {e['name']}")
                     break
             st.models.append((list(st.active), st.theta.copy()))
-        name = None if accepted is None else accepted["name"]
-        tried = [
-            {**{k: v for k, v in t.items() if k not in ("theta", "err", "score")}, "accepted": t["name"] == name}
-            for t in tried
-        ]
-        st.rounds.append({**info, "tried": tried, "accepted": name, "removed": removed})
+        name = None if accepted is None else accepted.name
+        marked = tuple(dataclasses.replace(t, accepted=t.name == name) for t in tried)
+        st.rounds.append(dataclasses.replace(info, tried=marked, accepted=name, removed=tuple(removed)))
         st.trail.append(st.err)
         return accepted is not None
 
-    def select(self, st: _Branch, ties: list | None, ahead_of: list | None = None) -> _Branch:
+    def select(self, st: _Branch, ties: list[_Fork] | None, ahead_of: list | None = None) -> _Branch:
         """Rounds on ``st`` until one keeps nothing; with ``ahead_of`` (another branch's ``trail``),
         only while ``st`` is not behind it after the same round (``st.behind`` then says where)."""
         start = st.rnd
@@ -584,7 +569,7 @@ class _Loop:
         structure["excess_over_noise"] = _excess(plain_e, err_e, self.noise, self.m)
         return plain_e, err_e, r_e, structure
 
-    def look_ahead(self, st: _Branch, end: tuple, ties: list) -> tuple:
+    def look_ahead(self, st: _Branch, end: tuple, ties: list[_Fork]) -> tuple:
         """The look-ahead (the module's docstring, step 4) from the first near tie in ``ties``: the
         loop goes on from that round's runner-up too. Returns the branch kept and its ``ending``."""
         # the loop ended with structure left, and a round had a near tie. Go
@@ -596,40 +581,28 @@ class _Loop:
         # weight's branch there ends 0.003 mm above the tip force's, and running it out costs rounds)
         n_nominal, resolution = len(self.nominal_names), self.resolution
         before, tried_t, runner, info = ties[0]
-        k = info["round"]
+        k = info.round
         self.say(f"look-ahead: round {k} again, with {runner}")
-        first = next(t["name"] for t in st.rounds[k - 1]["tried"] if t["accepted"])
-        self.keep(before, tried_t, next(t for t in tried_t if t["name"] == runner), info)
+        first = next(t.name for t in st.rounds[k - 1].tried if t.accepted)
+        self.keep(before, tried_t, next(t for t in tried_t if t.name == runner), info)
         alt = self.select(before, None, ahead_of=st.trail)
-        other = {"first": runner, "effects": alt.active[n_nominal:], "rmse_held_out_mm": alt.plain}
-        la = {
-            "branches": [
-                {
-                    "first": first,
-                    "effects": st.active[n_nominal:],
-                    "rmse_held_out_mm": end[0],
-                    "unexplained_structure": _flagged(end[3]),
-                },
-                other,
-            ],
-            "needed": resolution,
-            "kept": first,
-        }
+        mine = BranchEnd(first, st.active[n_nominal:], end[0], unexplained_structure=_flagged(end[3]))
         if alt.behind:
-            other["behind_after_round"] = alt.behind
+            other = BranchEnd(runner, alt.active[n_nominal:], alt.plain, behind_after_round=alt.behind)
+            la = LookAhead((mine, other), needed=resolution, kept=first)
             self.say(f"  {runner}: behind after round {alt.behind} ({alt.plain:.4f} mm held out): given up")
         else:
             end_alt = self.ending(alt)
-            other["unexplained_structure"] = _flagged(end_alt[3])
-            other["rmse_held_out_mm"] = end_alt[0]
-            la["sse_drop"] = (end[1] ** 2 - end_alt[1] ** 2) * self.m / self.unit_of(end[1])
-            if la["sse_drop"] > resolution:
-                st, end, la["kept"] = alt, end_alt, runner
+            other = BranchEnd(runner, alt.active[n_nominal:], end_alt[0], unexplained_structure=_flagged(end_alt[3]))
+            drop = (end[1] ** 2 - end_alt[1] ** 2) * self.m / self.unit_of(end[1])
+            la = LookAhead((mine, other), needed=resolution, kept=first, sse_drop=drop)
+            if drop > resolution:
+                st, end, la = alt, end_alt, dataclasses.replace(la, kept=runner)
             self.say(
                 f"  {runner}: held-out {end_alt[0]:.4f} mm against {end[0]:.4f} mm (drop "
-                f"{la['sse_drop']:.1f}, needed {resolution:.1f}): kept the branch of {la['kept']}"
+                f"{drop:.1f}, needed {resolution:.1f}): kept the branch of {la.kept}"
             )
-        st.rounds[k - 1]["look_ahead"] = la
+        st.rounds[k - 1] = dataclasses.replace(st.rounds[k - 1], look_ahead=la)
         return st, end
 
     def joint_look(self, st: _Branch, end: tuple) -> tuple:
@@ -640,10 +613,10 @@ class _Loop:
         branch kept and its ``ending``."""
         assert st.shortfall is not None
         before, tried_j, first, info = st.shortfall
-        k = info["round"]
+        k = info.round
         self.say(f"joint look: round {k} again, with {first}")
         before.relaxed = True
-        self.keep(before, tried_j, next(t for t in tried_j if t["name"] == first), info)
+        self.keep(before, tried_j, next(t for t in tried_j if t.name == first), info)
         alt = self.select(before, None)
         end_alt = self.ending(alt)
         added = [a for a in alt.active if a not in st.active]
@@ -653,19 +626,19 @@ class _Loop:
         need = chi2_quantile(self.alpha, max(dof, 1))
         share_needed = _share_needed(self.min_excess, end[1], self.noise["floor_mm"])  # as for one effect
         ok = bool(added) and share >= share_needed and drop > need
-        jl = {
-            "first": first,
-            "effects": alt.active[len(self.nominal_names) :],
-            "added": added,
-            "removed": [a for a in st.active if a not in alt.active],
-            "rmse_held_out_mm": end_alt[0],
-            "rmse_before_mm": end[0],
-            "share_held_out": share,
-            "share_needed": share_needed,
-            "sse_drop": drop,
-            "needed": need,
-            "kept": ok,
-        }
+        jl = JointLook(
+            first=first,
+            effects=alt.active[len(self.nominal_names) :],
+            added=added,
+            removed=[a for a in st.active if a not in alt.active],
+            rmse_held_out_mm=end_alt[0],
+            rmse_before_mm=end[0],
+            share_held_out=share,
+            share_needed=share_needed,
+            sse_drop=drop,
+            needed=need,
+            kept=ok,
+        )
         self.say(
             f"  joint look: {' + '.join(added) or 'nothing'}: held-out {end_alt[0]:.4f} mm against "
             f"{end[0]:.4f} mm, {100 * share:.1f} % of the excess (needed {100 * share_needed:.0f} %)"
@@ -673,7 +646,7 @@ class _Loop:
         )
         if ok:
             st, end = alt, end_alt
-        st.rounds[k - 1]["joint_look"] = jl
+        st.rounds[k - 1] = dataclasses.replace(st.rounds[k - 1], joint_look=jl)
         return st, end
 
 
@@ -940,7 +913,7 @@ def calibrate(
             pp, fits, run, say, alpha=alpha, min_gain=min_gain, min_excess=min_excess, max_rounds=max_rounds,
             robust=robust,
         )  # fmt: skip
-        ties: list = []
+        ties: list[_Fork] = []
         st = cx.select(main, ties)
         end = cx.ending(st)
         if ties and _flagged(end[3]):  # the look-ahead (step 4)

@@ -88,6 +88,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -503,6 +504,16 @@ class _Sample:
         return self.hess(x, t, s_t) + jax.lax.cond(coupling, self.coupling_matrix, lambda *_: zero, x, t, None, s_t)
 
 
+class _NewtonState(NamedTuple):
+    """The state of :func:`_newton`'s loop."""
+
+    x: jax.Array  # (2P,) the iterate
+    HL: jax.Array  # (2P, 2P) the load's curvature learnt so far
+    gl: jax.Array  # (2P,) the load's gradient at x (the last step's, not computed twice)
+    it: jax.Array  # () iterations so far
+    done: jax.Array  # () bool: the last step was below round-off
+
+
 def _newton(sm: _Sample, x0, HL0):
     """Damped Newton on ``V`` (friction and the clearance's shortening frozen within a step): the
     backbone's and the wires' Hessian exact, the load's curvature learnt from its gradients along the
@@ -516,96 +527,125 @@ def _newton(sm: _Sample, x0, HL0):
     (2P,) with the load curvature ``HL0`` (2P, 2P) (a previous solve's, :func:`solve_warm`; zero for
     a cold start) and returns both at the end."""
     steps = jnp.asarray(_STEPS, x0.dtype)
+    init = _NewtonState(x0, HL0, sm.load_grad(x0), jnp.asarray(0), jnp.asarray(False))
+    st = jax.lax.while_loop(_newton_running, functools.partial(_newton_step, sm, steps), init)
+    return st.x, st.HL
 
-    def solve(H, g):
-        return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
-    def with_friction(x, t, s_t, H, g0):
-        # the rest of the friction force, frozen at the iterate (a constant force in V, module notes),
-        # and the step to the root of F: friction's part of dF/dx is not symmetric (an LU solve)
-        s = sm.stretch(x)
-        rest = sm.friction_rest(x, t, s, s_t)
-        return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t, s, s_t), g0 + rest)
+def _newton_running(st: _NewtonState):
+    """Whether another Newton step is due: within ``MAX_ITER`` and not converged."""
+    return (st.it < MAX_ITER) & ~st.done
 
-    def without(x, t, s_t, H, g0):  # V's own Newton step (symmetric: Cholesky)
-        return jnp.zeros_like(g0), solve(H, g0)
 
-    def search(x, d, t, rest, g, v0, short):
-        # backtracking: the largest of ``_STEPS`` with Armijo's decrease (with a round-off allowance,
-        # so converged steps are not rejected by noise in V), tried from the largest down; under a
-        # vmap over samples it runs until every sample has its step, which near the equilibrium is
-        # the first (so the load's gradient is computed once per step, not for all ten step sizes at
-        # once, which costs more on loaded samples)
-        def more(c):
-            return (c[0] < steps.shape[0]) & ~c[1]
+def _newton_step(sm: _Sample, steps, st: _NewtonState) -> _NewtonState:
+    """One Newton step: the direction at ``st.x`` (:func:`_direction`), its length by the line
+    searches, then the load's curvature updated from the change of its gradient along the step."""
+    x, HL, gl, it, _ = st
+    t = sm.factor(x)
+    # the clearance's shortening, frozen within the step; a run-time branch: the iterations carry no
+    # derivative (the implicit one is taken from F at the root), so zero clearance skips it
+    short = jax.lax.cond(sm.has_clearance, sm.shortening, lambda y: jnp.zeros_like(sm.c), x)
+    s_t = sm.stretch(x, short, t * sm.k)  # once, for V's value, gradient and matrix at x
+    d, g, rest = _direction(sm, x, t, short, s_t, HL, gl)
+    v0 = sm.value(x, t, short, s_t)
+    step = _force_search(sm, steps, x, d, g, _armijo_search(sm, steps, x, d, t, rest, g, v0, short), it)
+    x_new = x + step
+    gl_new = sm.load_grad(x_new)
+    HL = _sr1(HL, gl_new - gl, step)
+    done = jnp.max(jnp.abs(step)) <= 1e-13 * (1.0 + jnp.max(jnp.abs(x)))
+    return _NewtonState(x_new, HL, gl_new, it + 1, done)
 
-        def next_step(c):
-            s = steps[c[0]]
-            ok = sm.value(x + s * d, t, short) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (
-                1.0 + jnp.abs(v0)
-            )
-            return jnp.where(ok, c[0], c[0] + 1), ok
 
-        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
-        return jnp.where(found, steps[jnp.minimum(j, steps.shape[0] - 1)], 0.0) * d
+def _direction(sm: _Sample, x, t, short, s_t, HL, gl):
+    """The step's direction (2P,) at ``x``, ``F(x)`` (2P,) and friction's frozen rest (2P,): Newton's
+    on ``V`` with the learnt load curvature ``HL`` (with friction, on ``F``), the elastic part's alone
+    where that gives no descent, capped at ``MAX_STEP`` (a trust region)."""
+    g0, H = sm.grad(x, t, gl, short, s_t), sm.newton_matrix(x, t, short, s_t)
+    # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
+    # it stays a branch there, and a robot without friction skips its terms and the LU solve
+    rest, d_full = jax.lax.cond(
+        sm.has_friction, functools.partial(_friction_step, sm), _elastic_step, x, t, s_t, H + HL, g0
+    )
+    g = g0 + rest  # F(x)
+    d_elastic = _cholesky_step(H, g)  # the elastic part's step, where the full one gives no descent
+    d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
+    return d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300)), g, rest
 
-    def force_search(x, d, g, step, it):
-        # Friction's safeguard. V (its rest frozen) describes the step's start only, and its full steps
-        # can cycle: with the backbone's compression a wire pulled alone alternated between two taut
-        # sets at |F| 168 for all 50 iterations (tests/test_compression.py). So from iteration
-        # ``_FORCE_SEARCH`` on, the step must lower |F|^2 (Armijo's on the force, which g is at x: the
-        # Newton direction on F descends it), the largest of ``_STEPS`` that does, V's own step where
-        # none does. A while loop, not a branch: under a vmap over samples it runs no trial at all
-        # until some sample is that far (a branch would be a select, its force evaluated every time).
-        n = steps.shape[0]
-        gg = jnp.dot(g, g)
-        noise = (1e-9 * (1.0 + jnp.max(jnp.abs(sm.E * x)))) ** 2  # |F| this small: converged
 
-        def more(c):
-            return sm.has_friction & (it >= _FORCE_SEARCH) & (c[0] < n) & ~c[1]
+def _cholesky_step(H, g):
+    """``-H^-1 g`` for a positive definite ``H`` (2P, 2P)."""
+    return -jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(H), g)
 
-        def next_step(c):
-            s = steps[c[0]]
-            y = x + s * d
-            F = sm.force_value(y, sm.load_grad(y))
-            ok = jnp.dot(F, F) <= (1.0 - 1e-4 * s) * gg + noise
-            return jnp.where(ok, c[0], c[0] + 1), ok
 
-        j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
-        return jnp.where(found, steps[jnp.minimum(j, n - 1)] * d, step)
+def _friction_step(sm: _Sample, x, t, s_t, H, g0):
+    """With friction: its force beyond the mean factors, frozen at the iterate (a constant force in
+    ``V``, module notes), and the step to the root of ``F`` (friction's part of ``dF/dx`` is not
+    symmetric: an LU solve)."""
+    s = sm.stretch(x)
+    rest = sm.friction_rest(x, t, s, s_t)
+    return rest, -jnp.linalg.solve(H + sm.friction_matrix(x, t, s, s_t), g0 + rest)
 
-    def body(state):
-        x, HL, gl, it, _ = state  # gl: the load's gradient at x (the last step's, not computed twice)
-        t = sm.factor(x)
-        # the clearance's shortening, frozen within the step; a run-time branch: the iterations carry no
-        # derivative (the implicit one is taken from F at the root), so zero clearance skips it
-        short = jax.lax.cond(sm.has_clearance, sm.shortening, lambda y: jnp.zeros_like(sm.c), x)
-        s_t = sm.stretch(x, short, t * sm.k)  # once, for V's value, gradient and matrix at x
-        g0, H = sm.grad(x, t, gl, short, s_t), sm.newton_matrix(x, t, short, s_t)
-        # a run-time branch on the friction coefficients: they are shared by a vmap over samples, so
-        # it stays a branch there, and a robot without friction skips its terms and the LU solve
-        rest, d_full = jax.lax.cond(sm.has_friction, with_friction, without, x, t, s_t, H + HL, g0)
-        g = g0 + rest  # F(x)
-        d_elastic = solve(H, g)  # the elastic part's step, where the full one gives no descent
-        d = jnp.where(jnp.all(jnp.isfinite(d_full)) & (jnp.dot(g, d_full) < 0), d_full, d_elastic)
-        d = d * jnp.minimum(1.0, MAX_STEP / jnp.maximum(jnp.max(jnp.abs(d)), 1e-300))  # a trust region
-        step = force_search(x, d, g, search(x, d, t, rest, g, sm.value(x, t, short, s_t), short), it)
-        x_new = x + step
-        # SR1 update of the load's curvature from the change of its gradient along the step
-        gl_new = sm.load_grad(x_new)
-        r = gl_new - gl - HL @ step
-        rs = jnp.dot(r, step)
-        use = jnp.abs(rs) > 1e-8 * jnp.sqrt(jnp.dot(r, r) * jnp.dot(step, step)) + 1e-300
-        HL = HL + jnp.where(use, jnp.outer(r, r) / jnp.where(use, rs, 1.0), 0.0)
-        done = jnp.max(jnp.abs(step)) <= 1e-13 * (1.0 + jnp.max(jnp.abs(x)))
-        return x_new, HL, gl_new, it + 1, done
 
-    def cond(state):
-        return (state[3] < MAX_ITER) & ~state[4]
+def _elastic_step(x, t, s_t, H, g0):
+    """Without friction: no rest, and ``V``'s own Newton step (symmetric: Cholesky)."""
+    return jnp.zeros_like(g0), _cholesky_step(H, g0)
 
-    init = (x0, HL0, sm.load_grad(x0), jnp.asarray(0), jnp.asarray(False))
-    x, HL = jax.lax.while_loop(cond, body, init)[:2]
-    return x, HL
+
+def _armijo_search(sm: _Sample, steps, x, d, t, rest, g, v0, short):
+    """The step (2P,) along ``d``: the largest of ``steps`` with Armijo's decrease of ``V`` (value
+    ``v0`` at ``x``; a round-off allowance, so converged steps are not rejected by noise in V), tried
+    from the largest down, 0 where none. Under a vmap over samples it runs until every sample has its
+    step, which near the equilibrium is the first (so the load's gradient is computed once per step,
+    not for all ten step sizes at once, which costs more on loaded samples)."""
+
+    def more(c):
+        return (c[0] < steps.shape[0]) & ~c[1]
+
+    def next_step(c):
+        s = steps[c[0]]
+        ok = sm.value(x + s * d, t, short) + s * jnp.dot(rest, d) <= v0 + 1e-4 * s * jnp.dot(g, d) + 1e-13 * (
+            1.0 + jnp.abs(v0)
+        )
+        return jnp.where(ok, c[0], c[0] + 1), ok
+
+    j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
+    return jnp.where(found, steps[jnp.minimum(j, steps.shape[0] - 1)], 0.0) * d
+
+
+def _force_search(sm: _Sample, steps, x, d, g, step, it):
+    """Friction's safeguard on the step (2P,) along ``d``. ``V`` (its rest frozen) describes the step's
+    start only, and its full steps can cycle: with the backbone's compression a wire pulled alone
+    alternated between two taut sets for all the iterations (tests/test_compression.py). So from
+    iteration ``_FORCE_SEARCH`` on, the step must lower ``|F|^2`` (Armijo's on the force, which ``g`` is
+    at ``x``: the Newton direction on ``F`` descends it), the largest of ``steps`` that does, ``V``'s
+    own ``step`` where none does. A while loop, not a branch: under a vmap over samples it runs no
+    trial at all until some sample is that far (a branch would be a select, its force evaluated every
+    time)."""
+    n = steps.shape[0]
+    gg = jnp.dot(g, g)
+    noise = (1e-9 * (1.0 + jnp.max(jnp.abs(sm.E * x)))) ** 2  # |F| this small: converged
+
+    def more(c):
+        return sm.has_friction & (it >= _FORCE_SEARCH) & (c[0] < n) & ~c[1]
+
+    def next_step(c):
+        s = steps[c[0]]
+        y = x + s * d
+        F = sm.force_value(y, sm.load_grad(y))
+        ok = jnp.dot(F, F) <= (1.0 - 1e-4 * s) * gg + noise
+        return jnp.where(ok, c[0], c[0] + 1), ok
+
+    j, found = jax.lax.while_loop(more, next_step, (jnp.asarray(0), jnp.asarray(False)))
+    return jnp.where(found, steps[jnp.minimum(j, n - 1)] * d, step)
+
+
+def _sr1(HL, dg, step):
+    """The load's curvature ``HL`` (2P, 2P) after a symmetric rank-one update from the change ``dg``
+    of its gradient along ``step`` (skipped where the update's denominator is round-off)."""
+    r = dg - HL @ step
+    rs = jnp.dot(r, step)
+    use = jnp.abs(rs) > 1e-8 * jnp.sqrt(jnp.dot(r, r) * jnp.dot(step, step)) + 1e-300
+    return HL + jnp.where(use, jnp.outer(r, r) / jnp.where(use, rs, 1.0), 0.0)
 
 
 @functools.cache
