@@ -1,0 +1,173 @@
+"""The bounds meet hardware: the same command reached along two histories, against the reduced and
+the push-pull uncertainty bounds of the calibrated robot.
+
+    python benchmarks/hysteresis.py [--no-readme]
+
+**Pairs.** In each out-and-back pattern of a recording (its ``pattern_label``: a segment bent out and
+back, a wire pulled and released; the turn at the command farthest from the start on the pattern's
+dominant wire), each sample on the way back is set against the way out at the same command: the two
+samples of the way out whose dominant-wire commands bracket it, interpolated linearly (tip and every
+wire's command). A pair is kept where the interpolated commands agree with the sample's on every wire
+within ``TOL_MM``. The measured difference is ``|p_back - p_out|`` of the tracker's tips (a norm: any
+frame); it holds the tracker's noise too (the calibration's floor is given beside).
+
+**Bounds.** At the sample's configuration (the calibrated robot's equilibrium at its command, constant
+curvature, no load), the largest tip displacement over each wire's error within its identified play
+(the backlash's full width ``c_k``: the change of a wire's effective displacement when its motion
+reverses): ``dp_max_reduced`` (the taut wires only, the paper's bound) and ``dp_max_full`` (push-pull).
+
+Robots: FTDCR v4 (train and validation recordings, the shipped calibration's robot and play) and FTDCR
+v6 (its training recording; its calibration identifies no backlash, so its bounds are zero: the row
+says what the measured differences are, against nothing).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+import tension_zones as tz
+from tension_zones.analysis import config_metrics
+from tension_zones.calibration import read_opencr
+from tension_zones.calibration._design_file import calibrated_design
+from tension_zones.model import equilibrium
+
+#: A pair's commands agree on every wire within this (mm): a few servo steps of 0.0153 mm.
+TOL_MM = 0.05
+
+
+def _out_and_back(q):
+    """``(dominant wire, index of the turn)`` of a pattern's commands (M, N), or None where it is not
+    an out-and-back (fewer than three samples on either side of its farthest command)."""
+    k = int(np.argmax(np.ptp(q, axis=0)))
+    turn = int(np.argmax(np.abs(q[:, k] - q[0, k])))
+    return (k, turn) if 3 <= turn <= q.shape[0] - 4 else None
+
+
+def pairs(data) -> list[tuple[int, int, int, float, float]]:
+    """``(b, o, o + 1, t, mismatch)``: each sample ``b`` on the way back of an out-and-back pattern,
+    the two samples of the way out whose commands on the pattern's dominant wire bracket its command,
+    the fraction ``t`` between them, and the largest difference on any wire between ``b``'s command and
+    the interpolated one (mm); kept where that is at most ``TOL_MM``."""
+    q, groups = np.asarray(data.q), np.asarray(data.groups)
+    out = []
+    for g in np.unique(groups):
+        idx = np.flatnonzero(groups == g)
+        shape = _out_and_back(q[idx])
+        if shape is None:
+            continue
+        k, turn = shape
+        way_out, way_back = idx[: turn + 1], idx[turn + 1 :]
+        for b in way_back:
+            for o, o1 in itertools.pairwise(way_out):
+                lo, hi = q[o, k], q[o1, k]
+                if hi != lo and min(lo, hi) <= q[b, k] <= max(lo, hi):
+                    t = (q[b, k] - lo) / (hi - lo)
+                    mismatch = float(np.max(np.abs(q[b] - (q[o] + t * (q[o1] - q[o])))))
+                    if mismatch <= TOL_MM:
+                        out.append((int(b), int(o), int(o1), float(t), mismatch))
+                    break
+    return out
+
+
+def measure(robot, play, data) -> dict:
+    """Per pair: the measured difference between the way back and the way out interpolated at the same
+    command, and the bounds at that command's configuration."""
+    P = pairs(data)
+    q, p = np.asarray(data.q), np.asarray(data.p)
+    b, o, o1 = (np.array([x[i] for x in P]) for i in range(3))
+    t = np.array([x[3] for x in P])[:, None]
+    p_out = p[o] + t * (p[o1] - p[o])
+    B = jax.jit(jax.vmap(lambda x: equilibrium(robot, x)))(q[b])
+    m = jax.jit(jax.vmap(lambda c: config_metrics(robot, c, play)))(B)
+    return {
+        "measured": np.linalg.norm(p[b] - p_out, axis=1),
+        "reduced": np.asarray(m["dp_max_reduced"]),
+        "full": np.asarray(m["dp_max_full"]),
+        "mismatch": np.array([x[4] for x in P]),
+    }
+
+
+def row(name: str, r: dict, floor: float, play_note: str) -> str:
+    meas = r["measured"]
+    cells = [name, f"{meas.size}", f"{np.median(meas):.3f} / {np.percentile(meas, 90):.3f}"]
+    cells.append(f"{np.median(r['mismatch']):.3f}")
+    cells.append("-" if floor is None else f"{floor:.3f}")
+    for mode in ("reduced", "full"):
+        bound = r[mode]
+        if np.all(bound == 0):
+            cells.append("0 (no play identified)")
+            continue
+        inside = np.mean(meas <= bound)
+        ratio = meas / bound
+        cells.append(
+            f"{np.median(bound):.3f}; {100 * inside:.0f} % inside; "
+            f"ratio {np.median(ratio):.2f} / {np.percentile(ratio, 90):.2f}"
+        )
+    cells.append(play_note)
+    return "| " + " | ".join(cells) + " |"
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--no-readme", action="store_true", help="do not rewrite benchmarks/README.md")
+    args = p.parse_args(argv)
+    ex = tz.example_path
+    rep = json.loads(ex("ftdcr_v4/calibration.json").read_text())
+    v4 = tz.Robot.from_dict(calibrated_design(rep["parameters"], (3, 3, 3)))
+    play = np.asarray(tz.Robot.calibrated_block(calibrated_design(rep["parameters"], (3, 3, 3)))["wire_play_mm"])
+    v6 = tz.Robot.from_json(ex("ftdcr_v6/design.json"))
+    rows = []
+    for name, robot, dq, files, floor, note in (
+        (
+            "FTDCR v4",
+            v4,
+            play,
+            ("ftdcr_v4/train.csv", "ftdcr_v4/val.csv"),
+            rep["noise_floor_mm"],
+            "shipped calibration: play 0.03-0.21 mm",
+        ),
+        (
+            "FTDCR v6",
+            v6,
+            np.zeros(v6.n_wires),
+            ("ftdcr_v6/train.csv",),
+            float("nan"),
+            "declared design; no backlash identified",
+        ),
+    ):
+        train = read_opencr(ex(files[0]), n_wires=robot.n_wires)
+        recordings = [train] + [read_opencr(ex(f), n_wires=robot.n_wires, servo_ids=train.servo_ids) for f in files[1:]]
+        res = [measure(robot, dq, data) for data in recordings]
+        merged = {k: np.concatenate([r[k] for r in res]) for k in res[0]}
+        rows.append(row(name, merged, floor, note))
+    md = "\n".join(
+        [
+            (
+                "| robot | pairs | measured difference, median / 90th pct (mm) | command mismatch, median (mm) "
+                "| noise floor (mm) | reduced bound: median (mm); pairs inside; measured / bound, median / 90th pct "
+                "| push-pull bound: the same | play |"
+            ),
+            "|---|---|---|---|---|---|---|---|",
+            *rows,
+        ]
+    )
+    print(md)
+    if not args.no_readme:
+        from _readme import write_section
+
+        write_section("HYSTERESIS", md, "The bounds meet hardware: one command, two histories")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
