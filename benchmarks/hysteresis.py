@@ -141,7 +141,7 @@ def main(argv=None) -> int:
             v6,
             np.zeros(v6.n_wires),
             ("ftdcr_v6/train.csv",),
-            float("nan"),
+            None,
             "declared design; no backlash identified",
         ),
     ):
