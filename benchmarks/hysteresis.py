@@ -3,13 +3,10 @@ the push-pull uncertainty bounds of the calibrated robot.
 
     python benchmarks/hysteresis.py [--no-readme]
 
-**Pairs.** In each out-and-back pattern of a recording (its ``pattern_label``: a segment bent out and
-back, a wire pulled and released; the turn at the command farthest from the start on the pattern's
-dominant wire), each sample on the way back is set against the way out at the same command: the two
-samples of the way out whose dominant-wire commands bracket it, interpolated linearly (tip and every
-wire's command). A pair is kept where the interpolated commands agree with the sample's on every wire
-within ``TOL_MM``. The measured difference is ``|p_back - p_out|`` of the tracker's tips (a norm: any
-frame); it holds the tracker's noise too (the calibration's floor is given beside).
+**Pairs.** :func:`tension_zones.calibration.path_pairs`: each sample on the way back of an out-and-back
+pattern against the way out interpolated at the same command (every wire within 0.05 mm); the
+measured difference ``|p_back - p_out|`` holds the tracker's noise too (the calibration's floor is
+given beside).
 
 **Bounds.** At the sample's configuration (the calibrated robot's equilibrium at its command, constant
 curvature, no load), the largest tip displacement over each wire's error within its identified play
@@ -24,7 +21,6 @@ says what the measured differences are, against nothing).
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import sys
 from pathlib import Path
@@ -37,63 +33,21 @@ sys.path.insert(0, str(HERE))
 
 import tension_zones as tz
 from tension_zones.analysis import config_metrics
-from tension_zones.calibration import read_opencr
-from tension_zones.calibration._design_file import calibrated_design
+from tension_zones.calibration import calibrated_design, path_pairs, read_opencr
 from tension_zones.model import equilibrium
-
-#: A pair's commands agree on every wire within this (mm): a few servo steps of 0.0153 mm.
-TOL_MM = 0.05
-
-
-def _out_and_back(q):
-    """``(dominant wire, index of the turn)`` of a pattern's commands (M, N), or None where it is not
-    an out-and-back (fewer than three samples on either side of its farthest command)."""
-    k = int(np.argmax(np.ptp(q, axis=0)))
-    turn = int(np.argmax(np.abs(q[:, k] - q[0, k])))
-    return (k, turn) if 3 <= turn <= q.shape[0] - 4 else None
-
-
-def pairs(data) -> list[tuple[int, int, int, float, float]]:
-    """``(b, o, o + 1, t, mismatch)``: each sample ``b`` on the way back of an out-and-back pattern,
-    the two samples of the way out whose commands on the pattern's dominant wire bracket its command,
-    the fraction ``t`` between them, and the largest difference on any wire between ``b``'s command and
-    the interpolated one (mm); kept where that is at most ``TOL_MM``."""
-    q, groups = np.asarray(data.q), np.asarray(data.groups)
-    out = []
-    for g in np.unique(groups):
-        idx = np.flatnonzero(groups == g)
-        shape = _out_and_back(q[idx])
-        if shape is None:
-            continue
-        k, turn = shape
-        way_out, way_back = idx[: turn + 1], idx[turn + 1 :]
-        for b in way_back:
-            for o, o1 in itertools.pairwise(way_out):
-                lo, hi = q[o, k], q[o1, k]
-                if hi != lo and min(lo, hi) <= q[b, k] <= max(lo, hi):
-                    t = (q[b, k] - lo) / (hi - lo)
-                    mismatch = float(np.max(np.abs(q[b] - (q[o] + t * (q[o1] - q[o])))))
-                    if mismatch <= TOL_MM:
-                        out.append((int(b), int(o), int(o1), float(t), mismatch))
-                    break
-    return out
 
 
 def measure(robot, play, data) -> dict:
-    """Per pair: the measured difference between the way back and the way out interpolated at the same
-    command, and the bounds at that command's configuration."""
-    P = pairs(data)
-    q, p = np.asarray(data.q), np.asarray(data.p)
-    b, o, o1 = (np.array([x[i] for x in P]) for i in range(3))
-    t = np.array([x[3] for x in P])[:, None]
-    p_out = p[o] + t * (p[o1] - p[o])
-    B = jax.jit(jax.vmap(lambda x: equilibrium(robot, x)))(q[b])
+    """Per pair (:func:`~tension_zones.calibration.path_pairs`): the measured difference, and the bounds
+    at the back sample's configuration."""
+    pairs = path_pairs(data)
+    B = jax.jit(jax.vmap(lambda x: equilibrium(robot, x)))(pairs.q)
     m = jax.jit(jax.vmap(lambda c: config_metrics(robot, c, play)))(B)
     return {
-        "measured": np.linalg.norm(p[b] - p_out, axis=1),
+        "measured": pairs.difference,
         "reduced": np.asarray(m["dp_max_reduced"]),
         "full": np.asarray(m["dp_max_full"]),
-        "mismatch": np.array([x[4] for x in P]),
+        "mismatch": pairs.mismatch,
     }
 
 
