@@ -243,6 +243,8 @@ def test_a_calibrated_design_file_keeps_every_fitted_routing_and_per_wire_value(
     block = tz.Robot.calibrated_block(d)
     assert block["preload_N"] == phys["preload"]
     assert block["wire_play_mm"] == [rep["parameters"]["fitted"]["backlash"][f"play_{k}_mm"] for k in range(1, 10)]
+    shipped = json.loads(tz.example_path("ftdcr_v4/calibrated.design.json").read_text())
+    assert shipped == calibrated_design(rep["parameters"], (3, 3, 3), "calibration.json")  # it ships regenerated
     d["calibrated"]["wire_play_mm"][0] = -0.1
     with pytest.raises(ValueError, match="wire_play_mm must be at least 0"):
         tz.Robot.from_dict(d)
