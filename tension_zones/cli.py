@@ -208,8 +208,13 @@ def cmd_reproduce(args) -> None:
 
 
 # --- optimize -----------------------------------------------------------------------
+def _numbers(values) -> str:
+    """Per-segment numbers, comma-separated."""
+    return ", ".join(f"{v:.4g}" for v in values)
+
+
 def cmd_optimize(args) -> None:
-    from .design._optimise import optimize
+    from .design._optimise import optimize, wires_label
     from .design._scenario import load_scenario
     from .plots import OUTPUT_FILES, write_outputs
 
@@ -223,6 +228,12 @@ def cmd_optimize(args) -> None:
     best = result["best"]
     if best is None:
         print("no feasible design: see result.json for each wire count's violations")
+    elif "design" in best:  # several segments: per segment, proximal first
+        print(
+            f"best: {wires_label(best['n_wires'])} wires, r = {_numbers(best['pitch_radius_mm'])} mm, "
+            f"k_w = {_numbers(best['wire_stiffness_N_per_mm'])} N/mm, preload = {_numbers(best['preload_N'])} N, "
+            f"objective {best['objective']:.4g}"
+        )
     else:
         print(
             f"best: {best['n_wires']} wires, r = {best['pitch_radius_mm']:.4g} mm, "

@@ -22,10 +22,14 @@ import jax
 import numpy as np
 
 from .._io import LOCK_NAME, atomic_path, folder_lock
+from ..analysis._chain import config_metrics
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
 from ..model._design import Design, read_json
+from ..model._robot import Robot
 from ..model._statics import as_wrench, compliance_pose
+from ._optimise import chain_spread
+from ._scenario import wires_label
 from ._space import Space
 
 FORMAT = "tension-zones exploration 1"
@@ -40,6 +44,17 @@ def _kinematic_pose(design: Design, theta_L, delta, dq):
     one, the reduced Jacobian has rank 1)."""
     m = pose_metrics(design, theta_L, delta, dq)
     return {**m, "controllable": m["n_taut"] >= 2}
+
+
+def _kinematic_config(robot: Robot, B, dq):
+    """:func:`~tension_zones.analysis.config_metrics` at one configuration ``B`` (S, 2), and whether it
+    is controllable: the taut wires span all ``2S`` bending directions (:func:`~._optimise.chain_spread`
+    above :data:`SPAN_TOL`; for one segment, two taut wires)."""
+    return {**config_metrics(robot, B, dq), "controllable": chain_spread(robot, B) > SPAN_TOL}
+
+
+#: The smallest singular value of the taut wires' unit directions above which they span (rank 2S).
+SPAN_TOL = 1e-9
 
 
 def _loaded_pose(design: Design, theta_L, delta, dq, wrench):
@@ -99,7 +114,7 @@ def objective(column: str) -> tuple[str, str]:
 
 
 def explore_designs(
-    designs: Design,
+    designs: Design | Robot,
     theta_L,
     delta,
     dq=DEFAULT_DQ,
@@ -112,11 +127,13 @@ def explore_designs(
     done: dict[int, np.ndarray] | None = None,
     on_chunk: Callable[[int, np.ndarray], None] | None = None,
 ) -> dict[str, np.ndarray] | None:
-    """The workspace statistics (:data:`STATS`) of a batch of designs over a grid, in memory.
+    """The workspace statistics (:data:`STATS`) of a batch of designs over a grid, or of robots over
+    configurations, in memory.
 
     Args:
-        designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,).
-        theta_L, delta: the grid's axes (rad).
+        designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,);
+            or robots of one structure, a :class:`Robot` likewise (no load).
+        theta_L, delta: the grid's axes (rad); robots: the configurations ``B`` (M, S, 2) and ``None``.
         dq: joint-level uncertainty (mm), traced.
         load: ``None`` or the tip force (3,) / wrench (6,) (N, N mm, base frame), traced: adds the
             compliance statistics.
@@ -124,10 +141,15 @@ def explore_designs(
             :func:`~tension_zones.analysis.sweep_designs`.
 
     Returns ``{column: (N,)}`` on process 0 (``None`` on the others). Each column equals the NumPy
-    reduction of :func:`~tension_zones.sweep_grid`'s arrays for that design (tested to 1e-12).
+    reduction of :func:`~tension_zones.sweep_grid`'s (a robot's: ``sweep_configs``') arrays for that
+    design (tested to 1e-12).
     """
     args = (np.float64(dq),) if load is None else (np.float64(dq), np.asarray(as_wrench(load)))
-    fn = _kinematic_pose if load is None else _loaded_pose
+    fn: Callable = _kinematic_pose if load is None else _loaded_pose
+    if isinstance(designs, Robot):
+        if load is not None:
+            raise ValueError("a batch of robots has no compliance statistics yet: load must be None")
+        fn = _kinematic_config
     return sweep_designs(
         fn,
         designs,
@@ -153,14 +175,21 @@ def explore_designs(
 #: with and without a load, kept above it), plus ``chunks.designs x DESIGN_BYTES`` on the host (the
 #: chunk's designs and results, with room).
 POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
+#: A robot's chunk holds about ``chunks.poses x (CONFIG_BYTES + CONFIG_BYTES_N3 x N^3)`` bytes for ``N``
+#: wires in all (the exact bound's pair terms; XLA's memory analysis, two and three segments of 3 to 8
+#: wires each, kept above it).
+CONFIG_BYTES, CONFIG_BYTES_N3 = 4000, 30
 
 
-def chunk_memory(space: Space, n: int) -> int:
-    """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``)."""
+def chunk_memory(space: Space, n) -> int:
+    """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``;
+    several segments: ``n`` a combination of counts, see ``CONFIG_BYTES``)."""
     devices = len(jax.local_devices())
-    return (
-        devices * space.poses_per_chunk * (POSE_BYTES + POSE_BYTES_N2 * n * n) + space.designs_per_chunk * DESIGN_BYTES
-    )
+    if space.segments:
+        per_pose = CONFIG_BYTES + CONFIG_BYTES_N3 * sum(n) ** 3
+    else:
+        per_pose = POSE_BYTES + POSE_BYTES_N2 * n * n
+    return devices * space.poses_per_chunk * per_pose + space.designs_per_chunk * DESIGN_BYTES
 
 
 def plan(space: Space) -> str:
@@ -168,18 +197,18 @@ def plan(space: Space) -> str:
     memory estimate (:func:`chunk_memory`) is more than the machine has (``tension_zones._resources``)."""
     from .._resources import check_memory, gb
 
-    n = max(space.n_wires)
+    n = max(space.n_wires, key=lambda k: chunk_memory(space, k))
+    poses = "configurations" if space.segments else "poses"
     check_memory(
         chunk_memory(space, n),
-        f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} poses of {n} wires",
+        f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} {poses} of {wires_label(n)} wires",
         'lower the space\'s "chunks" ("poses": the poses per step)',
     )
     designs = sum(space.count(k) for k in space.n_wires)
-    poses = space.theta_L.size * space.delta.size
     chunks = sum(-(-space.count(k) // space.designs_per_chunk) for k in space.n_wires)
     return (
-        f"exploring {designs:,} designs x {poses:,} poses = {designs * poses:.3g} design-poses in "
-        f"{chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)"
+        f"exploring {designs:,} designs x {space.n_poses:,} {poses} = {designs * space.n_poses:.3g} "
+        f"design-{poses} in {chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)"
     )
 
 
@@ -253,7 +282,7 @@ class _Store:
         else:
             self.manifest = {
                 **ident,
-                "done": {str(n): [] for n in space.n_wires},
+                "done": {wires_label(n): [] for n in space.n_wires},
                 "chunks_total": sum(-(-space.count(n) // space.designs_per_chunk) for n in space.n_wires),
                 "complete": False,
             }
@@ -263,8 +292,8 @@ class _Store:
             except OSError as e:
                 raise ValueError(f"cannot write the output folder {str(self.out)!r}: {e.strerror or e}") from None
 
-    def _chunk_path(self, n: int, c: int) -> Path:
-        return self.out / "chunks" / f"n{n}_{c:06d}.npy"
+    def _chunk_path(self, n, c: int) -> Path:
+        return self.out / "chunks" / f"n{wires_label(n)}_{c:06d}.npy"
 
     def _save_manifest(self) -> None:
         _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))  # type: ignore[arg-type,return-value]
@@ -272,14 +301,14 @@ class _Store:
     def done(self, n: int) -> dict[int, np.ndarray]:
         """The chunks of ``n`` wires the manifest lists as done, read back (a listed chunk whose file
         has gone is computed again)."""
-        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][str(n)]}
+        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][wires_label(n)]}
         return {c: np.load(p) for c, p in paths.items() if p.exists()}
 
     def save(self, n: int, c: int, rows: np.ndarray) -> None:
         """One chunk's rows: the file first, then the manifest (a crash between leaves a file that
         the manifest does not list, computed again on resuming: nothing is lost or counted twice)."""
         _write_atomic(self._chunk_path(n, c), lambda p: np.save(p, rows))
-        done = self.manifest["done"][str(n)]
+        done = self.manifest["done"][wires_label(n)]
         if c not in done:
             done.append(c)
         self._save_manifest()
@@ -354,16 +383,17 @@ def _explore(space: Space, store: _Store | None, quiet: bool):
     for n in space.n_wires:
         done = store.done(n) if store is not None else None
         on_chunk = (lambda c, rows, n=n: store.save(n, c, rows)) if store is not None else None
+        theta_L, delta = (space.configs, None) if space.segments else (space.theta_L, space.delta)
         stats = explore_designs(
             space.batch(n),
-            space.theta_L,
-            space.delta,
+            theta_L,
+            delta,
             space.dq,
             space.load,
             designs_per_chunk=space.designs_per_chunk,
             poses_per_chunk=space.poses_per_chunk,
             quiet=quiet,
-            desc=f"{n} wires",
+            desc=f"{wires_label(n)} wires",
             done=done,
             on_chunk=on_chunk,
         )
@@ -454,15 +484,25 @@ def default_front(space: Space) -> list[str]:
     fraction. (The statistics alone mostly improve together with a larger radius and stiffer
     wires, so a front of statistics only often holds one design per wire count.)"""
     third = "deflection_mm_reduced_worst" if space.load is not None else "controllable_fraction"
-    return ["pitch_radius_mm", "dp_max_reduced_worst", third]
+    return ["pitch_radius_mm_max" if space.segments else "pitch_radius_mm", "dp_max_reduced_worst", third]
+
+
+def structure_groups(table: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """``[(label, rows)]``: the designs of each wire count (several segments: each combination of the
+    segments' counts, ``"4+3"``), in order, ``rows`` (N,) bool."""
+    per = sorted(k for k in table if k.startswith("n_wires_"))
+    keys = np.stack([np.asarray(table[k]) for k in per or ["n_wires"]], axis=1)
+    return [
+        (wires_label(tuple(u) if per else u[0]), np.all(keys == u, axis=1)) for u in np.unique(keys, axis=0).tolist()
+    ]
 
 
 def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]) -> str:
     """One line: what was explored and how the front looks."""
     on = pareto_front(table, columns)
-    counts = sorted(set(table["n_wires"].tolist()))
-    share = ", ".join(f"{n} wires: {int(np.sum(on & (table['n_wires'] == n)))}" for n in counts)
+    groups = structure_groups(table)
+    share = ", ".join(f"{label} wires: {int(np.sum(on & rows))}" for label, rows in groups)
     return (
-        f"explored {table['n_wires'].size} designs ({', '.join(map(str, counts))} wires) in "
+        f"explored {table['n_wires'].size} designs ({', '.join(label for label, _ in groups)} wires) in "
         f"{seconds:.1f} s; Pareto front of {' vs '.join(columns)}: {int(on.sum())} designs ({share})"
     )
