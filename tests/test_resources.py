@@ -4,12 +4,14 @@ does not answer."""
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import tension_zones as tz
@@ -24,6 +26,29 @@ SPACE = {
     "theta_L_deg": [10, 80, 35],
     "delta_deg": [0, 300, 60],
 }
+#: Work in many small chunks, long enough to be interrupted midway (16 wires cost far more per pose than 3).
+SLOW_SPACE = {
+    "n_wires": [16],
+    "pitch_radius_mm": [1.0, 2.0],
+    "sample": {"method": "grid", "points": 24},
+    "theta_L_deg": [0, 84, 2],
+    "delta_deg": [0, 360, 1],
+    "chunks": {"designs": 2, "poses": 1320},
+}
+#: A sweep long enough to be interrupted midway (128 wires: the measures cost n^2 per pose).
+SWEEP_128 = [
+    "sweep",
+    "--wires",
+    "128",
+    "--length",
+    "20",
+    "--pitch-radius",
+    "2",
+    "--theta-step",
+    "2",
+    "--delta-step",
+    "2",
+]
 
 
 def _one_line(capsys, rc, code=2):
@@ -107,6 +132,46 @@ def test_a_coordinator_that_does_not_answer_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+#: Ctrl-C stops every command within this many seconds.
+STOP_S = 5
+
+
+def _cli_env():
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+
+
+def _interrupt(argv, started, log: Path, settle: float = 0.0) -> str:
+    """Run ``tension-zones argv`` in a process of its own, send it Ctrl-C (SIGINT) once
+    ``started(stderr so far)`` holds (and ``settle`` seconds more), and check how it ends: status 130
+    within ``STOP_S`` of the signal, one line ``tension-zones: interrupted`` and no traceback on
+    stderr (progress output above it). Returns stderr. (stderr goes to the file ``log``, read as it
+    grows.)"""
+    with open(log, "w") as sink:
+        p = subprocess.Popen(
+            [sys.executable, "-m", "tension_zones.cli", *argv], env=_cli_env(), stdout=subprocess.DEVNULL, stderr=sink
+        )
+        try:
+            deadline = time.monotonic() + 180
+            while not started(log.read_text()):
+                if p.poll() is not None or time.monotonic() > deadline:
+                    pytest.fail(f"ended or stalled before its work started (status {p.poll()}): {log.read_text()}")
+                time.sleep(0.02)
+            time.sleep(settle)
+            p.send_signal(signal.SIGINT)
+            t0 = time.monotonic()
+            p.wait(timeout=30)
+            seconds = time.monotonic() - t0
+        finally:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+    err = log.read_text()
+    assert p.returncode == 130 and seconds < STOP_S, (p.returncode, seconds, err)
+    assert err.endswith("tension-zones: interrupted\n") and err.count("tension-zones:") == 1, err
+    assert "Traceback" not in err, err
+    return err
+
+
 @pytest.mark.slow
 def test_ctrl_c_stops_a_long_optimize_within_seconds(tmp_path):
     """A compiled loop of 10^8 steps does not return to Python: the watchdog ends it, status 130, one
@@ -122,31 +187,73 @@ def test_ctrl_c_stops_a_long_optimize_within_seconds(tmp_path):
             }
         )
     )
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    p = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "tension_zones.cli",
-            "optimize",
-            "--scenario",
-            str(scenario),
-            "--out",
-            str(tmp_path / "o"),
-        ],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    seen = ""
-    while "wire counts" not in seen:  # the progress bar: the command is running
-        seen += p.stderr.read(1) or pytest.fail(f"ended before its progress bar: {seen}")
-    time.sleep(1)  # into the compile or the compiled loop
-    p.send_signal(signal.SIGINT)
-    t0 = time.monotonic()
-    _, err = p.communicate(timeout=30)
-    assert time.monotonic() - t0 < 5
-    assert p.returncode == 130 and err.endswith("tension-zones: interrupted\n"), err
-    assert "Traceback" not in err and err.count("tension-zones:") == 1, err
+    argv = ["optimize", "--scenario", str(scenario), "--out", str(tmp_path / "o")]
+    # the progress bar says the command runs; a second more takes it into the compile or the compiled loop
+    _interrupt(argv, lambda err: "wire counts" in err, tmp_path / "stderr.txt", settle=1.0)
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_sweep_and_the_rerun_writes_it(tmp_path, capsys):
+    """Interrupted once its progress bar has moved: no .npz (nor a hidden one); the same command then
+    writes it."""
+    out = tmp_path / "s.npz"
+    argv = SWEEP_128 + ["--out", str(out)]
+    _interrupt(argv, lambda err: re.search(r"sweep: +[1-9]\d*%", err) is not None, tmp_path / "stderr.txt")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stderr.txt"]
+    assert main(argv) == 0
+    with np.load(out) as f:
+        assert f["dp_max_reduced"].shape == (43, 181)
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_an_explore_and_the_rerun_resumes_it(tmp_path, capsys):
+    """Interrupted once a chunk is saved: the folder holds the manifest and the chunks done, no table
+    and no front; the same command resumes from those chunks and writes them."""
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps(SLOW_SPACE))
+    out = tmp_path / "o"
+
+    def chunks_done(_err):
+        try:
+            return sum(map(len, json.loads((out / "manifest.json").read_text())["done"].values()))
+        except (OSError, ValueError):
+            return 0
+
+    argv = ["explore", "--space", str(space), "--out", str(out)]
+    _interrupt(argv, chunks_done, tmp_path / "stderr.txt")
+    done = chunks_done("")
+    assert 1 <= done < 12
+    assert sorted(p.name for p in out.iterdir() if not p.name.startswith(".")) == ["chunks", "manifest.json"]
+    assert json.loads((out / "manifest.json").read_text())["complete"] is False
+    capsys.readouterr()
+    assert main(argv) == 0
+    said = capsys.readouterr().out
+    assert f"resuming the exploration in {str(out)!r}: " in said, said
+    assert int(said.split(": ")[1].split(" of ")[0]) >= done, said
+    assert {"table.npz", "table.csv", "front.csv"} <= {p.name for p in out.iterdir()}
+    with np.load(out / "table.npz") as table:
+        assert table["design"].size == 24 and np.all(np.isfinite(table["dp_max_reduced_worst"]))
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_calibration_and_the_rerun_reports(tmp_path, capsys):
+    """Interrupted after the nominal fit: no report, no plot; the same command then writes the report
+    (the folder holds nothing a rerun would refuse)."""
+    out = tmp_path / "o"
+    argv = [
+        "calibrate",
+        str(tz.example_path("synthetic/unknown_a_3w.csv")),
+        "--design",
+        str(tz.example_path("synthetic/unknown_a_3w.design.json")),
+        "--effects",
+        "backlash",
+        "--out",
+        str(out),
+    ]
+    _interrupt(argv, lambda err: "noise floor" in err, tmp_path / "stderr.txt")
+    assert not out.exists() or not [p for p in out.iterdir() if not p.name.startswith(".")]
+    assert main(argv) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert [e["name"] for e in report["effects"]] == ["backlash"]
+    assert not [p for p in out.iterdir() if p.name.startswith(".partial-")]
