@@ -567,12 +567,24 @@ def _add_calibrate_parser(sub) -> None:
 
 
 # ---- explore: design-space exploration ----------------------------------------------
+#: The seconds JAX's own ``initialization_timeout`` runs past ``--coordinator-timeout``: past it,
+#: ``jax.distributed.initialize`` aborts the process from C++ (a stack trace, status 134), so the
+#: command's own deadline (:func:`_deadline`) must come first.
+JOIN_MARGIN_S = 10
+
+
 def _init_distributed(args) -> None:
-    """Join a ``jax.distributed`` run (before anything touches a JAX device)."""
+    """Join a ``jax.distributed`` run (before anything touches a JAX device). Every process, process
+    0 as well as the others, gives up in one line (status 2) where the run has not come together
+    within ``--coordinator-timeout`` seconds: a worker first waits for process 0 to answer
+    (:func:`_wait_for_coordinator`), then every process waits for all of them to join."""
+    import time
+
     given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
     if not args.distributed and all(v is None for v in given.values()):
         return
-    _positive("--coordinator-timeout", args.coordinator_timeout)
+    timeout = _positive("--coordinator-timeout", args.coordinator_timeout)
+    deadline = time.monotonic() + timeout
     missing = [k for k, v in given.items() if v is None]
     if len(missing) < 3:  # explicit coordinates: all three
         if missing:
@@ -583,15 +595,53 @@ def _init_distributed(args) -> None:
             "process_id": args.process_id,
         }
         if args.process_id != 0:
-            _wait_for_coordinator(args.coordinator, args.coordinator_timeout)
+            _wait_for_coordinator(args.coordinator, timeout)
     else:  # --distributed: the cluster's environment says (SLURM, Open MPI, ...)
         kw = {}
     import jax
 
+    left = max(1.0, deadline - time.monotonic())  # JAX counts whole seconds
+    with _deadline(left, _not_joined(args, timeout)):
+        try:
+            jax.distributed.initialize(**kw, initialization_timeout=math.ceil(left) + JOIN_MARGIN_S)
+        except (RuntimeError, ValueError) as e:
+            raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+
+
+def _not_joined(args, timeout: float) -> str:
+    """The one line of a distributed run that did not come together within ``timeout`` seconds."""
+    if args.coordinator is None:
+        return (
+            f"the processes of the distributed run did not all join within {timeout:g} s; check that the "
+            "cluster started every one of them (e.g. srun's task count), or raise --coordinator-timeout"
+        )
+    n = args.num_processes
+    return (
+        f"not every one of the {n} processes (--num-processes) joined --coordinator {args.coordinator} within "
+        f"{timeout:g} s (this is process {args.process_id}); start every --process-id 0..{n - 1} with the same "
+        "--coordinator and --num-processes, or raise --coordinator-timeout"
+    )
+
+
+@contextlib.contextmanager
+def _deadline(seconds: float, message: str):
+    """End the process with ``message`` as its one error line (status 2) where the block has not
+    ended within ``seconds``: for a call that cannot be interrupted from Python, such as
+    ``jax.distributed.initialize``, which waits in C++ (and past its own timeout aborts the process)."""
+    import threading
+
+    def end():
+        with contextlib.suppress(OSError):
+            os.write(2, f"tension-zones: error: {message}\n".encode())
+        os._exit(2)
+
+    timer = threading.Timer(seconds, end)
+    timer.daemon = True
+    timer.start()
     try:
-        jax.distributed.initialize(**kw, initialization_timeout=max(1, math.ceil(args.coordinator_timeout)))
-    except (RuntimeError, ValueError) as e:
-        raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+        yield
+    finally:
+        timer.cancel()
 
 
 def _wait_for_coordinator(address: str, timeout: float) -> None:

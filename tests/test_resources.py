@@ -132,6 +132,34 @@ def test_a_coordinator_that_does_not_answer_is_one_line(tmp_path, capsys):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
+def test_a_process_0_whose_workers_never_join_gives_up_in_one_line(tmp_path):
+    """Process 0 of two, the other never started: one line and status 2 at --coordinator-timeout
+    (before JAX's own timeout, past which it would abort from C++), nothing written."""
+    import socket
+
+    from tension_zones.cli import JOIN_MARGIN_S
+
+    space = tmp_path / "space.json"
+    space.write_text(json.dumps(SPACE))
+    with socket.socket() as s:  # a free port
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    argv = ["explore", "--space", str(space), "--out", str(tmp_path / "o"), "--coordinator", f"127.0.0.1:{port}"]
+    argv += ["--num-processes", "2", "--process-id", "0", "--coordinator-timeout", "3"]
+    t0 = time.monotonic()
+    cmd = [sys.executable, "-m", "tension_zones.cli", *argv]
+    r = subprocess.run(cmd, env=_cli_env(), capture_output=True, text=True, timeout=120, check=False)
+    assert time.monotonic() - t0 < 3 + JOIN_MARGIN_S
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "Traceback" not in r.stderr, r.stderr
+    assert r.stderr == (
+        f"tension-zones: error: not every one of the 2 processes (--num-processes) joined --coordinator "
+        f"127.0.0.1:{port} within 3 s (this is process 0); start every --process-id 0..1 with the same "
+        "--coordinator and --num-processes, or raise --coordinator-timeout\n"
+    )
+    assert not (tmp_path / "o").exists()
+
+
 #: Ctrl-C stops every command within this many seconds.
 STOP_S = 5
 
