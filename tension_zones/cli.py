@@ -435,8 +435,9 @@ def cmd_calibrate(args) -> None:
 
 
 def _calibration_size(args, data, val, n_segments: int):
-    """``--subsample``, then the memory estimate: refused beyond what the machine has unless ``--force``
-    (one line saying what to do). Returns the recordings calibrated and the estimate's line in a list."""
+    """``--subsample``, then the memory estimate: refused beyond what the machine has unless
+    ``--no-resource-check`` (one line saying what to do). Returns the recordings calibrated and the
+    estimate's line in a list."""
     from ._resources import MEMORY_SHARE, check_memory, gb, machine_memory
     from .calibration._fits import MEMORY_BASE, MEMORY_PER_SAMPLE, peak_memory, worker_count
 
@@ -451,7 +452,7 @@ def _calibration_size(args, data, val, n_segments: int):
     what = f"calibrating {n:,} samples x {n_segments} segment(s)" + (
         f" with {workers} worker process(es)" if workers else ""
     )
-    if not args.force:
+    if not args.no_resource_check:
         have = machine_memory() or 0
         fits = (MEMORY_SHARE * have / (1 + workers) - MEMORY_BASE) / (MEMORY_PER_SAMPLE * n_segments)
         k = math.ceil(n * (args.subsample or 1) / fits) if fits > 0 else 0
@@ -459,7 +460,7 @@ def _calibration_size(args, data, val, n_segments: int):
             need,
             what,
             (f"pass --subsample {k} (one sample in {k}, in acquisition order)" if k else "pass fewer --workers")
-            + " or --force to run it anyway",
+            + " or --no-resource-check to run it anyway",
         )
     return data, val, [f"{what}: about {gb(need)} of memory (estimated)"]
 
@@ -541,12 +542,8 @@ def _add_calibrate_parser(sub) -> None:
     c.add_argument(
         "--drop-bad", action="store_true", help="drop isolated bad rows (listed in the report) instead of failing"
     )
-    c.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing report in --out; run a recording whose memory estimate is beyond "
-        "what the computer has",
-    )
+    _add_force(c, "an existing report in --out")
+    _add_resource_check(c, "a memory estimate beyond the memory here")
     c.add_argument(
         "--subsample",
         type=int,
@@ -736,6 +733,14 @@ def _add_explore_parser(sub) -> None:
 
 def _add_force(parser, what: str) -> None:
     parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
+def _add_resource_check(parser, what: str) -> None:
+    parser.add_argument(
+        "--no-resource-check",
+        action="store_true",
+        help=f"run even what the resource checks refuse up front ({what})",
+    )
 
 
 class _Parser(argparse.ArgumentParser):

@@ -67,12 +67,36 @@ def test_calibrate_beyond_the_machines_memory_is_refused_up_front(tmp_path, caps
     err = _one_line(capsys, main(argv))
     assert (
         "calibrating 400 samples x 1 segment(s) needs about 800 MB of memory (estimated), more than 50% of "
-        "the 1.6 GB of memory here; pass --subsample 2 (one sample in 2, in acquisition order) or --force to run "
-        "it anyway"
+        "the 1.6 GB of memory here; pass --subsample 2 (one sample in 2, in acquisition order) or "
+        "--no-resource-check to run it anyway"
     ) in err, err
     assert not (tmp_path / "o").exists()
     err = _one_line(capsys, main(argv + ["--subsample", "0"]))
     assert "--subsample must be 1 or more, got 0" in err
+    # --force replaces an earlier report and nothing else: the memory check stands
+    assert "needs about 800 MB of memory" in _one_line(capsys, main(argv + ["--force"]))
+
+
+def test_no_resource_check_runs_a_calibration_past_the_memory_check(tmp_path, capsys, monkeypatch):
+    """The calibration is reached (here a stand-in that stops it), the estimate said first."""
+    import tension_zones.calibration
+
+    def reached(*args, log=None, **kw):
+        log("the loop starts")
+        raise ValueError("the calibration was reached")
+
+    monkeypatch.setattr(_resources, "machine_memory", lambda: int(1.6e9))
+    monkeypatch.setattr(tension_zones.calibration, "calibrate", reached)
+    design = str(tz.example_path("synthetic/nominal_3w.design.json"))
+    data = str(tz.example_path("synthetic/nominal_3w.csv"))
+    argv = ["calibrate", data, "--design", design, "--out", str(tmp_path / "o"), "--workers", "0"]
+    rc = main(argv + ["--no-resource-check"])
+    err = capsys.readouterr().err
+    assert rc == 2 and err.splitlines() == [
+        "calibrating 400 samples x 1 segment(s): about 800 MB of memory (estimated)",
+        "the loop starts",
+        "tension-zones: error: the calibration was reached",
+    ], err
 
 
 def test_a_chunk_beyond_the_machines_memory_is_refused_and_the_work_said(tmp_path, capsys):
