@@ -679,11 +679,12 @@ def cmd_explore(args) -> None:
     space = load_space(args.space)
     front = default_front(space) if args.front is None else [c.strip() for c in args.front.split(",")]
     check_front(space, front)
-    line = plan(space)  # the work, said up front (a chunk beyond the machine's memory: refused)
+    check = not args.no_resource_check
+    line = plan(space, check)  # the work, said up front (beyond the memory here or the work's caps: refused)
     if not args.quiet and jax.process_index() == 0:
         print(line)
     t0 = time.perf_counter()
-    table = explore(space, args.out, quiet=args.quiet, log=print)
+    table = explore(space, args.out, quiet=args.quiet, log=print, resource_check=check)
     if table is None:  # another process of a distributed run: process 0 writes
         return
     paths = write_front(table, args.out, front)
@@ -706,6 +707,9 @@ def _add_explore_parser(sub) -> None:
         "each optionally min:/max: (default: pitch_radius_mm, "
         "dp_max_reduced_worst, and deflection_mm_reduced_worst with a load, "
         "else controllable_fraction)",
+    )
+    _add_resource_check(
+        e, "a chunk's memory estimate beyond the memory here, too many chunks, too long an estimated computing time"
     )
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     d = e.add_argument_group("several processes and hosts (jax.distributed)")

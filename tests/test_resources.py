@@ -104,10 +104,63 @@ def test_a_chunk_beyond_the_machines_memory_is_refused_and_the_work_said(tmp_pat
     big.write_text(json.dumps({**SPACE, "chunks": {"poses": 10**9}}))
     err = _one_line(capsys, main(["explore", "--space", str(big), "--out", str(tmp_path / "o")]))
     assert "a chunk of 128 designs x 1,000,000,000 poses of 3 wires needs about 465 GB of memory (estimated)" in err
-    assert 'lower the space\'s "chunks" ("poses": the poses per step)' in err
+    assert 'lower the space\'s "chunks" ("poses": the poses per step), or pass --no-resource-check' in err
     assert not (tmp_path / "o").exists()
     line = tz.design._explore.plan(tz.parse_space(SPACE))
     assert line.startswith("exploring 2 designs x 18 poses = 36 design-poses in 1 chunk(s) (about "), line
+
+
+#: A day and a half of estimated computing (16 wires: four times the cost of a pose at 4).
+DAY_SPACE = {
+    "n_wires": [16],
+    "sample": {"method": "halton", "designs": 1_000_000},
+    "theta_L_deg": [0, 85, 0.5],
+    "delta_deg": [0, 360, 1],
+}
+
+
+def test_the_work_is_estimated_up_front_and_refused_past_the_caps():
+    """The line says the estimated computing; past ``MAX_CHUNKS`` or ``MAX_WORK_S`` ``plan`` refuses
+    (rows in test_bad_inputs) unless the resource checks are off."""
+    from tension_zones.design import _explore
+
+    line = _explore.plan(tz.parse_space(DAY_SPACE), resource_check=False)
+    assert line == (
+        "exploring 1,000,000 designs x 61,731 poses = 6.17e+10 design-poses in 7,813 chunk(s) (about 5.64 MB of "
+        "memory per chunk; about 34 h of computing, estimated)"
+    )
+    with pytest.raises(ValueError, match="would take about 34 h of computing"):
+        _explore.plan(tz.parse_space(DAY_SPACE))
+    many = tz.parse_space({**SPACE, "sample": {"method": "halton", "designs": 200_000}, "chunks": {"designs": 1}})
+    assert "in 200,000 chunk(s)" in _explore.plan(many, resource_check=False)
+    with pytest.raises(ValueError, match="more than 100,000 chunks"):
+        _explore.plan(many)
+    assert [_explore.about(s) for s in (0.25, 42, 95, 5000, 90_000, 2e6)] == [
+        "0.25 s",
+        "42 s",
+        "1.6 min",
+        "83 min",
+        "25 h",
+        "23 days",
+    ]
+
+
+def test_no_resource_check_starts_an_exploration_past_the_caps(tmp_path, capsys, monkeypatch):
+    """The work line first, then the exploration (here a stand-in that stops it) is reached."""
+    from tension_zones.design import _explore
+
+    def reached(space, out, resource_check=True, **kw):
+        raise ValueError(f"explore was reached (resource_check={resource_check})")
+
+    monkeypatch.setattr(_explore, "explore", reached)
+    space = tmp_path / "day.json"
+    space.write_text(json.dumps(DAY_SPACE))
+    argv = ["explore", "--space", str(space), "--out", str(tmp_path / "o")]
+    assert "would take about 34 h of computing" in _one_line(capsys, main(argv))
+    assert main(argv + ["--no-resource-check"]) == 2
+    out, err = capsys.readouterr()
+    assert out.startswith("exploring 1,000,000 designs x 61,731 poses") and "about 34 h of computing" in out, out
+    assert err == "tension-zones: error: explore was reached (resource_check=False)\n"
 
 
 def test_explore_locks_its_folder_and_a_stale_lock_does_not_block(tmp_path, capsys):
