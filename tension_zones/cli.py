@@ -438,7 +438,7 @@ def _calibration_size(args, data, val, n_segments: int):
     """``--subsample``, then the memory estimate: refused beyond what the machine has unless
     ``--no-resource-check`` (one line saying what to do). Returns the recordings calibrated and the
     estimate's line in a list."""
-    from ._resources import MEMORY_SHARE, check_memory, gb, machine_memory
+    from ._resources import MEMORY_SHARE, check_memory, cores, gb, machine_memory
     from .calibration._fits import MEMORY_BASE, MEMORY_PER_SAMPLE, peak_memory, worker_count
 
     if args.subsample is not None:
@@ -448,6 +448,12 @@ def _calibration_size(args, data, val, n_segments: int):
         data, val = keep(data), None if val is None else keep(val)
     n = data.n_samples + (0 if val is None else val.n_samples)
     workers = worker_count(args.workers, n * n_segments)
+    if args.workers is not None and workers < args.workers:
+        print(
+            f"tension-zones: note: --workers {args.workers} capped at {workers} (one per core beyond the "
+            f"first, at least one; {cores()} core(s) here)",
+            file=sys.stderr,
+        )
     need = peak_memory(n * n_segments, workers)
     what = f"calibrating {n:,} samples x {n_segments} segment(s)" + (
         f" with {workers} worker process(es)" if workers else ""

@@ -99,6 +99,22 @@ def test_no_resource_check_runs_a_calibration_past_the_memory_check(tmp_path, ca
     ], err
 
 
+def test_workers_beyond_the_cores_are_capped_with_a_note(tmp_path, capsys, monkeypatch):
+    from tension_zones.calibration import _fits
+
+    for module in (_resources, _fits):
+        monkeypatch.setattr(module, "cores", lambda: 2)
+    monkeypatch.setattr(_resources, "machine_memory", lambda: int(1e8))  # refused after the note: no fit
+    design = str(tz.example_path("synthetic/nominal_3w.design.json"))
+    data = str(tz.example_path("synthetic/nominal_3w.csv"))
+    rc = main(["calibrate", data, "--design", design, "--out", str(tmp_path / "o"), "--workers", "1000"])
+    note, error = capsys.readouterr().err.splitlines()
+    assert rc == 2 and note == (
+        "tension-zones: note: --workers 1000 capped at 1 (one per core beyond the first, at least one; 2 core(s) here)"
+    )
+    assert error.startswith("tension-zones: error: calibrating 400 samples x 1 segment(s) with 1 worker process(es)")
+
+
 def test_a_chunk_beyond_the_machines_memory_is_refused_and_the_work_said(tmp_path, capsys):
     big = tmp_path / "big.json"
     big.write_text(json.dumps({**SPACE, "chunks": {"poses": 10**9}}))
