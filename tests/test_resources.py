@@ -261,6 +261,15 @@ def _cli_env():
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
 
 
+#: ``tension-zones`` with SIGINT raising KeyboardInterrupt, as in a terminal: a runner that ignores
+#: SIGINT (a background job of a non-interactive shell, some test workers) passes the ignoring on to
+#: its children, and Python then installs no KeyboardInterrupt handler.
+CLI_WITH_CTRL_C = (
+    "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "from tension_zones.cli import main; sys.exit(main(sys.argv[1:]))"
+)
+
+
 def _interrupt(argv, started, log: Path, settle: float = 0.0) -> str:
     """Run ``tension-zones argv`` in a process of its own, send it Ctrl-C (SIGINT) once
     ``started(stderr so far)`` holds (and ``settle`` seconds more), and check how it ends: status 130
@@ -269,7 +278,7 @@ def _interrupt(argv, started, log: Path, settle: float = 0.0) -> str:
     grows.)"""
     with open(log, "w") as sink:
         p = subprocess.Popen(
-            [sys.executable, "-m", "tension_zones.cli", *argv], env=_cli_env(), stdout=subprocess.DEVNULL, stderr=sink
+            [sys.executable, "-c", CLI_WITH_CTRL_C, *argv], env=_cli_env(), stdout=subprocess.DEVNULL, stderr=sink
         )
         try:
             deadline = time.monotonic() + 180
