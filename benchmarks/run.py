@@ -596,6 +596,17 @@ def markdown_robots(rows) -> str:
     return "\n".join(out)
 
 
+def bench_hysteresis(quick):
+    """``hysteresis.py``'s table: measured pairs of one command against the calibrated robots' bounds
+    (the forced-backlash calibration of FTDCR v6 runs here, in a temporary folder)."""
+    import tempfile
+
+    import hysteresis
+
+    with tempfile.TemporaryDirectory() as tmp:
+        return {"table": hysteresis.table(hysteresis.measure_all(Path(tmp) / "forced"))}
+
+
 SECTIONS = {
     "kinematics": bench_kinematics,
     "compliance": bench_compliance,
@@ -604,9 +615,14 @@ SECTIONS = {
     "optimiser": bench_optimiser,
     "explore": bench_explore,
     "robots": bench_robots,
+    "hysteresis": bench_hysteresis,
 }
-#: Sections with a block of their own in benchmarks/README.md (the others share RESULTS).
-OWN_BLOCK = {"robots": ("ROBOTS", "Robots of several segments: measures per configuration", markdown_robots)}
+#: Sections with a block of their own in benchmarks/README.md (the others share RESULTS): marker,
+#: title, renderer, and whether the block starts with the machine line (timings do).
+OWN_BLOCK = {
+    "robots": ("ROBOTS", "Robots of several segments: measures per configuration", markdown_robots, True),
+    "hysteresis": ("HYSTERESIS", "The bounds meet hardware: one command, two histories", lambda r: r["table"], False),
+}
 
 
 def main(argv=None):
@@ -628,9 +644,9 @@ def main(argv=None):
         plot_scaling(res["scaling"], HERE / "scaling.png")
     from _readme import write_section
 
-    for name, (block, title, render) in OWN_BLOCK.items():
+    for name, (block, title, render, timed) in OWN_BLOCK.items():
         if name in res:
-            md_own = f"{machine_line(res)}\n\n{render(res[name])}"
+            md_own = f"{machine_line(res)}\n\n{render(res[name])}" if timed else render(res[name])
             print(md_own)
             if not args.no_readme:
                 write_section(block, md_own, title)

@@ -622,9 +622,10 @@ def cmd_calibrate(args) -> None:
 
 
 def _calibration_size(args, data, val, n_segments: int):
-    """``--subsample``, then the memory estimate: refused beyond what the machine has unless ``--force``
-    (one line saying what to do). Returns the recordings calibrated and the estimate's line in a list."""
-    from ._resources import MEMORY_SHARE, check_memory, gb, machine_memory
+    """``--subsample``, then the memory estimate: refused beyond what the machine has unless
+    ``--no-resource-check`` (one line saying what to do). Returns the recordings calibrated and the
+    estimate's line in a list."""
+    from ._resources import MEMORY_SHARE, check_memory, cores, gb, machine_memory
     from .calibration._fits import MEMORY_BASE, MEMORY_PER_SAMPLE, peak_memory, worker_count
 
     if args.subsample is not None:
@@ -634,11 +635,17 @@ def _calibration_size(args, data, val, n_segments: int):
         data, val = keep(data), None if val is None else keep(val)
     n = data.n_samples + (0 if val is None else val.n_samples)
     workers = worker_count(args.workers, n * n_segments)
+    if args.workers is not None and workers < args.workers:
+        print(
+            f"tension-zones: note: --workers {args.workers} capped at {workers} (one per core beyond the "
+            f"first, at least one; {cores()} core(s) here)",
+            file=sys.stderr,
+        )
     need = peak_memory(n * n_segments, workers)
     what = f"calibrating {n:,} samples x {n_segments} segment(s)" + (
         f" with {workers} worker process(es)" if workers else ""
     )
-    if not args.force:
+    if not args.no_resource_check:
         have = machine_memory() or 0
         fits = (MEMORY_SHARE * have / (1 + workers) - MEMORY_BASE) / (MEMORY_PER_SAMPLE * n_segments)
         k = math.ceil(n * (args.subsample or 1) / fits) if fits > 0 else 0
@@ -646,7 +653,7 @@ def _calibration_size(args, data, val, n_segments: int):
             need,
             what,
             (f"pass --subsample {k} (one sample in {k}, in acquisition order)" if k else "pass fewer --workers")
-            + " or --force to run it anyway",
+            + " or --no-resource-check to run it anyway",
         )
     return data, val, [f"{what}: about {gb(need)} of memory (estimated)"]
 
@@ -728,12 +735,8 @@ def _add_calibrate_parser(sub) -> None:
     c.add_argument(
         "--drop-bad", action="store_true", help="drop isolated bad rows (listed in the report) instead of failing"
     )
-    c.add_argument(
-        "--force",
-        action="store_true",
-        help="replace an existing report in --out; run a recording whose memory estimate is beyond "
-        "what the computer has",
-    )
+    _add_force(c, "an existing report in --out")
+    _add_resource_check(c, "a memory estimate beyond the memory here")
     c.add_argument(
         "--subsample",
         type=int,
@@ -754,12 +757,24 @@ def _add_calibrate_parser(sub) -> None:
 
 
 # ---- explore: design-space exploration ----------------------------------------------
+#: The seconds JAX's own ``initialization_timeout`` runs past ``--coordinator-timeout``: past it,
+#: ``jax.distributed.initialize`` aborts the process from C++ (a stack trace, status 134), so the
+#: command's own deadline (:func:`_deadline`) must come first.
+JOIN_MARGIN_S = 10
+
+
 def _init_distributed(args) -> None:
-    """Join a ``jax.distributed`` run (before anything touches a JAX device)."""
+    """Join a ``jax.distributed`` run (before anything touches a JAX device). Every process, process
+    0 as well as the others, gives up in one line (status 2) where the run has not come together
+    within ``--coordinator-timeout`` seconds: a worker first waits for process 0 to answer
+    (:func:`_wait_for_coordinator`), then every process waits for all of them to join."""
+    import time
+
     given = {"--coordinator": args.coordinator, "--num-processes": args.num_processes, "--process-id": args.process_id}
     if not args.distributed and all(v is None for v in given.values()):
         return
-    _positive("--coordinator-timeout", args.coordinator_timeout)
+    timeout = _positive("--coordinator-timeout", args.coordinator_timeout)
+    deadline = time.monotonic() + timeout
     missing = [k for k, v in given.items() if v is None]
     if len(missing) < 3:  # explicit coordinates: all three
         if missing:
@@ -770,15 +785,53 @@ def _init_distributed(args) -> None:
             "process_id": args.process_id,
         }
         if args.process_id != 0:
-            _wait_for_coordinator(args.coordinator, args.coordinator_timeout)
+            _wait_for_coordinator(args.coordinator, timeout)
     else:  # --distributed: the cluster's environment says (SLURM, Open MPI, ...)
         kw = {}
     import jax
 
+    left = max(1.0, deadline - time.monotonic())  # JAX counts whole seconds
+    with _deadline(left, _not_joined(args, timeout)):
+        try:
+            jax.distributed.initialize(**kw, initialization_timeout=math.ceil(left) + JOIN_MARGIN_S)
+        except (RuntimeError, ValueError) as e:
+            raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+
+
+def _not_joined(args, timeout: float) -> str:
+    """The one line of a distributed run that did not come together within ``timeout`` seconds."""
+    if args.coordinator is None:
+        return (
+            f"the processes of the distributed run did not all join within {timeout:g} s; check that the "
+            "cluster started every one of them (e.g. srun's task count), or raise --coordinator-timeout"
+        )
+    n = args.num_processes
+    return (
+        f"not every one of the {n} processes (--num-processes) joined --coordinator {args.coordinator} within "
+        f"{timeout:g} s (this is process {args.process_id}); start every --process-id 0..{n - 1} with the same "
+        "--coordinator and --num-processes, or raise --coordinator-timeout"
+    )
+
+
+@contextlib.contextmanager
+def _deadline(seconds: float, message: str):
+    """End the process with ``message`` as its one error line (status 2) where the block has not
+    ended within ``seconds``: for a call that cannot be interrupted from Python, such as
+    ``jax.distributed.initialize``, which waits in C++ (and past its own timeout aborts the process)."""
+    import threading
+
+    def end():
+        with contextlib.suppress(OSError):
+            os.write(2, f"tension-zones: error: {message}\n".encode())
+        os._exit(2)
+
+    timer = threading.Timer(seconds, end)
+    timer.daemon = True
+    timer.start()
     try:
-        jax.distributed.initialize(**kw, initialization_timeout=max(1, math.ceil(args.coordinator_timeout)))
-    except (RuntimeError, ValueError) as e:
-        raise CLIError(f"jax.distributed.initialize failed: {str(e).splitlines()[0]}") from None
+        yield
+    finally:
+        timer.cancel()
 
 
 def _wait_for_coordinator(address: str, timeout: float) -> None:
@@ -819,11 +872,12 @@ def cmd_explore(args) -> None:
     space = load_space(args.space)
     front = default_front(space) if args.front is None else [c.strip() for c in args.front.split(",")]
     check_front(space, front)
-    line = plan(space)  # the work, said up front (a chunk beyond the machine's memory: refused)
+    check = not args.no_resource_check
+    line = plan(space, check)  # the work, said up front (beyond the memory here or the work's caps: refused)
     if not args.quiet and jax.process_index() == 0:
         print(line)
     t0 = time.perf_counter()
-    table = explore(space, args.out, quiet=args.quiet, log=print)
+    table = explore(space, args.out, quiet=args.quiet, log=print, resource_check=check)
     if table is None:  # another process of a distributed run: process 0 writes
         return
     paths = write_front(table, args.out, front)
@@ -846,6 +900,9 @@ def _add_explore_parser(sub) -> None:
         "each optionally min:/max: (default: pitch_radius_mm, "
         "dp_max_reduced_worst, and deflection_mm_reduced_worst with a load, "
         "else controllable_fraction)",
+    )
+    _add_resource_check(
+        e, "a chunk's memory estimate beyond the memory here, too many chunks, too long an estimated computing time"
     )
     e.add_argument("--quiet", action="store_true", help="no progress bar")
     d = e.add_argument_group("several processes and hosts (jax.distributed)")
@@ -873,6 +930,14 @@ def _add_explore_parser(sub) -> None:
 
 def _add_force(parser, what: str) -> None:
     parser.add_argument("--force", action="store_true", help=f"overwrite {what}")
+
+
+def _add_resource_check(parser, what: str) -> None:
+    parser.add_argument(
+        "--no-resource-check",
+        action="store_true",
+        help=f"run even what the resource checks refuse up front ({what})",
+    )
 
 
 class _Parser(argparse.ArgumentParser):

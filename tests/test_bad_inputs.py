@@ -32,6 +32,17 @@ GOOD_SCENARIO = {
 }
 
 
+#: A million designs of one chunk each (more than ``MAX_CHUNKS``).
+SPACE_CHUNKS = {"n_wires": 3, "sample": {"method": "halton", "designs": 10**6}, "chunks": {"designs": 1}}
+#: A million 16-wire designs on a fine grid: more estimated computing than ``MAX_WORK_S``.
+SPACE_DAY = {
+    "n_wires": 16,
+    "sample": {"method": "halton", "designs": 10**6},
+    "theta_L_deg": [0, 85, 0.5],
+    "delta_deg": [0, 360, 1],
+}
+
+
 def _scaled(lines, columns, factor):
     """CSV lines with ``columns`` multiplied by ``factor``, as text."""
     head = lines[0].split(",")
@@ -66,6 +77,10 @@ def _files(tmp):
     (tmp / "scen_nan.json").write_text('{"n_wires": [3], "joint_uncertainty_mm": NaN}')
     (tmp / "scen_big.json").write_text('{"n_wires": [3], "length_mm": 1e400}')
     (tmp / "space_inf.json").write_text('{"n_wires": 3, "pitch_radius_mm": [1, Infinity]}')
+    # explorations past the resource checks: too many chunks, a chunk beyond the memory, too long
+    (tmp / "space_chunks.json").write_text(json.dumps(SPACE_CHUNKS))
+    (tmp / "space_chunk_memory.json").write_text(json.dumps({"n_wires": 3, "chunks": {"poses": 10**9}}))
+    (tmp / "space_day.json").write_text(json.dumps(SPACE_DAY))
     (tmp / "scen_deep.json").write_text('{"weights": ' * 40 + "1" + "}" * 40)
     (tmp / "scen_deeper.json").write_text("[" * 100_000 + "]" * 100_000)
     for name, change in {
@@ -241,6 +256,35 @@ CLI = [
         "space_inf.json': key 'pitch_radius_mm[1]' is Infinity",
     ),
     ("json-scenario-deep", OPT + ["{tmp}/scen_deep.json", "--out", "{tmp}/o"], "nests deeper than 32 levels"),
+    # explore: the work said and capped before anything is written
+    (
+        "explore-too-many-chunks",
+        ["explore", "--space", "{tmp}/space_chunks.json", "--out", "{tmp}/o"],
+        (
+            "exploring 1,000,000 designs x 2,610 poses = 2.61e+09 design-poses in 1,000,000 chunks: more than "
+            '100,000 chunks (each is a file and an update of the manifest); raise "chunks" ("designs": the designs '
+            "per chunk, now 1) or sample fewer designs, or pass --no-resource-check "
+            "(explore(..., resource_check=False)) to run it anyway"
+        ),
+    ),
+    (
+        "explore-chunk-beyond-memory",
+        ["explore", "--space", "{tmp}/space_chunk_memory.json", "--out", "{tmp}/o"],
+        (
+            "a chunk of 128 designs x 1,000,000,000 poses of 3 wires needs about 465 GB of memory (estimated), more "
+            "than 50% of the"
+        ),
+    ),
+    (
+        "explore-a-day-of-work",
+        ["explore", "--space", "{tmp}/space_day.json", "--out", "{tmp}/o"],
+        (
+            "exploring 1,000,000 designs x 61,731 poses = 6.17e+10 design-poses would take about 34 h of computing "
+            "on 1 CPU process(es) (estimated at 2e+06 design-poses per second per process for 4 wires, fewer with "
+            "more), more than 24 h; sample fewer designs or a coarser grid, run it on more processes "
+            "(--distributed), or pass --no-resource-check (explore(..., resource_check=False)) to run it anyway"
+        ),
+    ),
     (
         "json-scenario-recursion",
         OPT + ["{tmp}/scen_deeper.json", "--out", "{tmp}/o"],
@@ -812,6 +856,12 @@ API = [
         "tension-score-psi-dot",
         lambda: tz.tension_score(tz.Design(3, 20.0, 2.0), 0.1, psi_dot=[1.0, 0.0]),
         "needs theta_L",
+    ),
+    ("explore-too-many-chunks", lambda: tz.explore(tz.parse_space(SPACE_CHUNKS)), "more than 100,000 chunks"),
+    (
+        "explore-a-day-of-work",
+        lambda: tz.explore(tz.parse_space(SPACE_DAY)),
+        "would take about 34 h of computing on 1 CPU process(es)",
     ),
     (
         "calibrate-workers",

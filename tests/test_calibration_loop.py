@@ -250,6 +250,21 @@ def test_a_calibrated_design_file_keeps_every_fitted_routing_and_per_wire_value(
         tz.Robot.from_dict(d)
 
 
+def test_ftdcr_v6_ships_its_calibration_and_the_robot_of_it():
+    """FTDCR v6's shipped report (a CLI run on train.csv alone) and its design file, regenerated from it:
+    the effects it found, no play (no backlash identified), the fitted weight in the block."""
+    from tension_zones.calibration._design_file import calibrated_design
+
+    rep = json.loads(tz.example_path("ftdcr_v6/calibration.json").read_text())
+    assert rep["validate"] is None and rep["data"].endswith("ftdcr_v6/train.csv")
+    assert "backlash" not in rep["parameters"]["fitted"]
+    shipped = json.loads(tz.example_path("ftdcr_v6/calibrated.design.json").read_text())
+    assert shipped == calibrated_design(rep["parameters"], (3, 3, 3), "calibration.json")
+    block = tz.Robot.calibrated_block(shipped)
+    assert "wire_play_mm" not in block and block["gravity_N_per_mm"][2] < 0
+    assert tz.Robot.from_dict(shipped).n_wires == 9
+
+
 def test_worker_count(monkeypatch):
     """How many worker processes the loop starts (calibration/_fits.py): never where spawn would run a
     plain script's top level again, nor for small problems; the environment variable is checked."""

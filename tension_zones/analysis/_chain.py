@@ -104,15 +104,9 @@ def _singular(J, r: int, n_wires: int):
     return s1, head[-1], jnp.where(jnp.isfinite(nz), nz, s1)
 
 
-def chain_J_xq(robot: Robot, B, mask=None):
-    """``J_xB pinv(J~_qB)`` (6, N) at ``B`` (S, 2): all wires (``mask=None``) or the ``mask`` (N,)'s rows;
-    slack wires' columns are exactly zero. NaN in ``B`` or the mask gives NaN."""
-    return robot.J_xq(B, mask)
-
-
 def _chain_measures(robot: Robot, B, dq, mask):
     """Every measure of :func:`config_measures` by the general chain formulas (any ``S``)."""
-    J = chain_J_xq(robot, B, mask)
+    J = robot.J_xq(B, mask)  # (6, N); slack wires' columns exactly zero
     dq = jnp.asarray(dq, J.dtype)
     r = _rank_cap(robot)
     out = {}

@@ -192,24 +192,97 @@ def chunk_memory(space: Space, n) -> int:
     return devices * space.poses_per_chunk * per_pose + space.designs_per_chunk * DESIGN_BYTES
 
 
-def plan(space: Space) -> str:
-    """The work of exploring ``space``, in one line; raises a one-line ``ValueError`` where a chunk's
-    memory estimate (:func:`chunk_memory`) is more than the machine has (``tension_zones._resources``)."""
+#: The most chunks an exploration takes with the resource checks on: each chunk is a file of its own
+#: and an update of the manifest, which lists every chunk done (rewritten whole each time).
+MAX_CHUNKS = 100_000
+#: Design-poses per second of one CPU process at 4 wires, kinematic and with a load (the CPU rates of
+#: benchmarks/README.md, "Design-space exploration"); a pose costs about n / 4 times as much for n wires
+#: (measured from 3 to 16). The basis of the work estimate (:func:`work_seconds`), off CPUs none.
+RATE_KINEMATIC, RATE_LOADED, RATE_WIRES = 2e6, 6e5, 4
+#: Design-configurations per second of one CPU process for a robot of ``RATE_CHAIN_WIRES`` wires in all
+#: (benchmarks/README.md, "Robots": two segments of 3 + 3 wires); a configuration costs about
+#: ``(N / RATE_CHAIN_WIRES)^3`` times as much for ``N`` wires (the exact bound's pair terms, ``O(N^3)``).
+RATE_CHAIN, RATE_CHAIN_WIRES = 5e4, 6
+#: The most computing an exploration takes with the resource checks on, in estimated seconds (a day).
+MAX_WORK_S = 86_400
+#: How an exploration's refusals say they can be overridden.
+OVERRIDE = "or pass --no-resource-check (explore(..., resource_check=False)) to run it anyway"
+
+
+def work_seconds(space: Space) -> float | None:
+    """The estimated computing time of exploring ``space`` (seconds), from the CPU rates
+    (``RATE_KINEMATIC``) shared by the run's processes; None off CPUs (no rate to go by)."""
+    if jax.default_backend() != "cpu":
+        return None
+    if space.segments:
+        cost = lambda n: (max(sum(n), RATE_CHAIN_WIRES) / RATE_CHAIN_WIRES) ** 3 / RATE_CHAIN
+    else:
+        rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
+        cost = lambda n: max(n, RATE_WIRES) / RATE_WIRES / rate
+    evals = sum(space.count(n) * space.n_poses * cost(n) for n in space.n_wires)
+    return evals / jax.process_count()
+
+
+def about(seconds: float) -> str:
+    """A duration for a message, in the largest unit it fills one and a half times: ``"25 h"``."""
+    for unit, size in (("days", 86_400), ("h", 3_600), ("min", 60)):
+        if seconds >= 1.5 * size:
+            return f"{_rounded(seconds / size)} {unit}"
+    return f"{_rounded(seconds)} s"
+
+
+def _rounded(x: float) -> str:
+    return f"{x:.2g}" if x < 100 else f"{x:,.0f}"
+
+
+def _check_work(space: Space, what: str, chunks: int, seconds: float | None) -> None:
+    """Raise a one-line ``ValueError`` where the exploration is larger than the resource checks take:
+    more than ``MAX_CHUNKS`` chunks, or more than ``MAX_WORK_S`` of estimated computing."""
+    if chunks > MAX_CHUNKS:
+        raise ValueError(
+            f"{what} in {chunks:,} chunks: more than {MAX_CHUNKS:,} chunks (each is a file and an update of the "
+            f'manifest); raise "chunks" ("designs": the designs per chunk, now {space.designs_per_chunk:,}) or '
+            f"sample fewer designs, {OVERRIDE}"
+        )
+    if seconds is not None and seconds > MAX_WORK_S:
+        raise ValueError(
+            f"{what} would take about {about(seconds)} of computing on {jax.process_count()} CPU process(es) "
+            f"(estimated at {_rate_words(space)}), more than {about(MAX_WORK_S)}; sample fewer designs or a "
+            f"coarser grid, run it on more processes (--distributed), {OVERRIDE}"
+        )
+
+
+def _rate_words(space: Space) -> str:
+    """The rate a work estimate rests on, for a message."""
+    if space.segments:
+        return f"{RATE_CHAIN:.2g} design-configurations per second per process for {RATE_CHAIN_WIRES} wires, fewer with more"
+    rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
+    return f"{rate:.2g} design-poses per second per process for {RATE_WIRES} wires, fewer with more"
+
+
+def plan(space: Space, resource_check: bool = True) -> str:
+    """The work of exploring ``space``, in one line: the designs x poses, the chunks, the memory of
+    one chunk and the estimated computing time. With ``resource_check``, raises a one-line
+    ``ValueError`` where a chunk's memory estimate (:func:`chunk_memory`) is more than the machine has
+    (``tension_zones._resources``), or the work more than ``MAX_CHUNKS`` chunks or ``MAX_WORK_S``."""
     from .._resources import check_memory, gb
 
     n = max(space.n_wires, key=lambda k: chunk_memory(space, k))
+    memory = chunk_memory(space, n)
     poses = "configurations" if space.segments else "poses"
-    check_memory(
-        chunk_memory(space, n),
-        f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} {poses} of {wires_label(n)} wires",
-        'lower the space\'s "chunks" ("poses": the poses per step)',
-    )
     designs = sum(space.count(k) for k in space.n_wires)
     chunks = sum(-(-space.count(k) // space.designs_per_chunk) for k in space.n_wires)
-    return (
-        f"exploring {designs:,} designs x {space.n_poses:,} {poses} = {designs * space.n_poses:.3g} "
-        f"design-{poses} in {chunks:,} chunk(s) (about {gb(chunk_memory(space, n))} of memory per chunk)"
-    )
+    seconds = work_seconds(space)
+    what = f"exploring {designs:,} designs x {space.n_poses:,} {poses} = {designs * space.n_poses:.3g} design-{poses}"
+    if resource_check:
+        check_memory(
+            memory,
+            f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} {poses} of {wires_label(n)} wires",
+            f'lower the space\'s "chunks" ("poses": the poses per step), {OVERRIDE}',
+        )
+        _check_work(space, what, chunks, seconds)
+    time = "" if seconds is None else f"; about {about(seconds)} of computing, estimated"
+    return f"{what} in {chunks:,} chunk(s) (about {gb(memory)} of memory per chunk{time})"
 
 
 # --------------------------------------------------------------------------------------------
@@ -352,7 +425,9 @@ def _open_store(out, space: Space, columns, log) -> _Store | None:
     return store
 
 
-def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[str, np.ndarray] | None:
+def explore(
+    space: Space, out=None, *, quiet: bool = False, log=None, resource_check: bool = True
+) -> dict[str, np.ndarray] | None:
     """Explore a design space: every design's workspace statistics, as one table.
 
     Args:
@@ -361,6 +436,8 @@ def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[st
             exploration, which is then resumed (a folder holding anything else is refused).
         quiet: no progress bar.
         log: called with one line when an exploration is resumed (e.g. ``print``).
+        resource_check: refuse, before anything is written, an exploration larger than the machine or
+            the checks take (:func:`plan`); False runs it anyway.
 
     Returns the table ``{column: (N,)}`` (rows: the designs of each wire count in turn; columns:
     ``design``, ``n_wires``, the design fields, ``wire_angle_k_deg``, then :data:`STATS`) on
@@ -368,7 +445,7 @@ def explore(space: Space, out=None, *, quiet: bool = False, log=None) -> dict[st
     ``manifest.json``, ``chunks/``, ``table.npz`` and ``table.csv`` there (process 0 writes).
     """
     columns = [s[0] for s in _stats(space.load is not None)]
-    plan(space)  # a chunk too large for the machine is refused before anything is written
+    plan(space, resource_check)  # too large for the machine or the checks: refused before anything is written
     store = None if out is None else _open_store(out, space, columns, log)
     try:
         return _explore(space, store, quiet)

@@ -23,7 +23,15 @@ import numpy as np
 
 from .._numerics import eps_of, nan_where, not_finite, straight_through
 from ._robot import Robot
-from ._statics import KKT_TOL, STATICS_TEMPERATURE, TAUT_REL_TOL, TensionSolution, as_wrench, compliance_pose
+from ._statics import (
+    KKT_TOL,
+    STATICS_TEMPERATURE,
+    TAUT_REL_TOL,
+    TensionSolution,
+    as_wrench,
+    compliance_pose,
+    kkt_residual,
+)
 
 #: The free sets of the tension QP are enumerated (``2^N``): robots of up to this many wires.
 MAX_CHAIN_WIRES = 12
@@ -41,16 +49,6 @@ def _set_tensions(A, rhs, f_min, free):
     AF = A * free[None, :]
     lam = jnp.linalg.pinv(AF @ AF.T, hermitian=True) @ (rhs - A @ (f_min * (1.0 - free)))
     return jnp.where(free > 0, AF.T @ lam, f_min), lam
-
-
-def kkt_residual(A, rhs, f_min, tau, lam):
-    """Relative KKT violation of ``min ||tau||^2, A tau = rhs, tau >= f_min``: zero exactly at the
-    optimum, where ``tau = max(f_min, A^T lam)`` and ``A tau = rhs``."""
-    norm_A = jnp.linalg.norm(A)
-    primal = jnp.linalg.norm(A @ tau - rhs)
-    station = jnp.max(jnp.abs(tau - jnp.maximum(f_min, A.T @ lam)))
-    scale = jnp.linalg.norm(rhs) + norm_A * jnp.maximum(jnp.max(jnp.abs(tau)), jnp.max(f_min)) + jnp.finfo(A.dtype).tiny
-    return (primal + station * norm_A) / scale
 
 
 def chain_min_norm_tensions(A, rhs, f_min) -> TensionSolution:

@@ -21,7 +21,7 @@ import dataclasses
 import numpy as np
 
 from ._robot import Robot
-from ._zones import BOUNDARY_TOL, Sector, TensionMap, _fold_points
+from ._zones import BOUNDARY_TOL, Sector, TensionMap, sectors_from_ends
 
 
 @dataclasses.dataclass(frozen=True)
@@ -89,37 +89,15 @@ def segment_tension_map(robot: Robot, j: int, B=None, still=None) -> TensionMap:
     terms = tuple(tuple(float(v) for v in x) for x in (r, a, c, s))
     rule = SegmentTensionMap(len(wires), 0.0, zones, (), terms)
     ends = [e for (lo, hi), h in zip(zones, half) if 0.0 < h < 180.0 for e in (lo, hi)]
-    sectors = _sectors(ends, rule.taut_at)
+    sectors = _merge_equal(sectors_from_ends(ends, rule.taut_at))
     if np.all(c == 0):  # every zone 180 deg wide: the segment's own map (the same class as a Design's)
         return TensionMap(len(wires), 0.0, zones, sectors)
     return dataclasses.replace(rule, sectors=sectors)
 
 
-def _sectors(ends, taut) -> tuple[Sector, ...]:
-    """Sectors of constant taut set covering [0, 360), from the zones' ends and the taut rule."""
-    pts: list[float] = []
-    for e in np.sort(np.mod(np.asarray(ends, float), 360.0)):
-        e = 0.0 if e > 360.0 - 1e-9 else float(e)
-        if not pts or e - pts[-1] > 1e-9:
-            pts.append(e)
-    if len(pts) > 1 and pts[0] + 360.0 - pts[-1] <= 1e-9:
-        pts.pop()
-    if not pts:  # no zone ends: one taut set everywhere
-        return (Sector(0.0, 360.0, taut(0.0), closed_start=True),)
-    raw: list[Sector] = []
-    if pts[0] > 0.0:
-        raw.append(Sector(0.0, pts[0], taut(0.5 * (pts[-1] - 360.0 + pts[0]))))
-    for i, p in enumerate(pts):
-        nxt = pts[i + 1] if i + 1 < len(pts) else 360.0
-        raw.append(Sector(p, p, taut(p)))
-        mid = 0.5 * (p + nxt) if i + 1 < len(pts) else 0.5 * (p + pts[0] + 360.0)
-        if nxt > p:
-            raw.append(Sector(p, nxt, taut(mid)))
-    return _merge_equal(_fold_points(raw))
-
-
 def _merge_equal(sectors: tuple[Sector, ...]) -> tuple[Sector, ...]:
-    """Join neighbouring intervals with the same taut set (a zone end where nothing changes)."""
+    """Join neighbouring intervals with the same taut set (a zone end where nothing changes: a zone that
+    only touches the boundary rule's margin)."""
     out: list[Sector] = []
     for sec in sectors:
         if out and out[-1].width_deg > 0 and out[-1].wires == sec.wires:

@@ -272,15 +272,21 @@ def kkt_residual(A, rhs, f_min, tau, lam):
 
     Both are zero exactly at the optimum (stationarity, bounds, dual feasibility and
     complementarity are all in ``tau = max(f_min, A^T lam)``); scaled by ``|rhs| + |A| max tau``.
-    Written on scalars (``A`` is 2 x n): vmapped, the per-pose products stay elementwise instead of
-    tiny batched matrix products, which XLA:CPU hands to a library call per chunk.
+    Any number of rows (a robot's ``2S``); ``f_min`` a scalar or one per wire. Written on scalars:
+    vmapped, the per-pose products stay elementwise instead of tiny batched matrix products, which
+    XLA:CPU hands to a library call per chunk.
     """
-    a0, a1, tk = per_wire(A[0]), per_wire(A[1]), per_wire(tau)
+    rows, tk = [per_wire(A[i]) for i in range(A.shape[0])], per_wire(tau)
     norm_A = jnp.linalg.norm(A)  # the design's: once per batch under vmap
-    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i] for i, ai in enumerate((a0, a1))])
-    station = wmax(wmap(lambda t, x, y: jnp.abs(t - jnp.maximum(f_min, x * lam[0] + y * lam[1])), tk, a0, a1))
+    primal = _norm([wsum(wmap(lambda x, t: x * t, ai, tk)) - rhs[i] for i, ai in enumerate(rows)])
+
+    def pull(*xs):  # a_k . lam, the rows in order
+        return functools.reduce(jnp.add, [x * lam[i] for i, x in enumerate(xs)])
+
+    fk = per_wire(jnp.broadcast_to(f_min, tau.shape))
+    station = wmax(wmap(lambda t, f, *xs: jnp.abs(t - jnp.maximum(f, pull(*xs))), tk, fk, *rows))
     max_tau = wmax(wmap(jnp.abs, tk))
-    scale = _norm(rhs) + norm_A * jnp.maximum(max_tau, f_min) + jnp.finfo(A.dtype).tiny
+    scale = _norm(rhs) + norm_A * jnp.maximum(max_tau, jnp.max(f_min)) + jnp.finfo(A.dtype).tiny
     return (primal + station * norm_A) / scale
 
 

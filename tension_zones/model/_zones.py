@@ -166,8 +166,16 @@ def tension_map(design: Design, theta_L=None, psi_dot=None) -> TensionMap:
         gamma = np.degrees(np.arctan2(T * dd, -td))
     centres = np.mod(gamma - alpha, 360.0)
     zones = tuple((float(c - 90.0), float(c + 90.0)) for c in centres)
+    ends = np.concatenate([centres - 90.0, centres + 90.0])
+    return TensionMap(design.n_wires, float(gamma), zones, sectors_from_ends(ends, lambda d: _taut_set(zones, d)))
+
+
+def sectors_from_ends(ends_deg, taut) -> tuple[Sector, ...]:
+    """Sectors of constant taut set covering [0, 360), from the zones' ends (deg) and ``taut(delta_deg)``
+    (the wires taut at a direction): open intervals between the ends and the ends themselves, each
+    end absorbed into a neighbour with the same taut set."""
     # breakpoints: every zone end, wrapped to [0, 360), merged when within 1e-9 deg
-    ends = np.mod(np.concatenate([centres - 90.0, centres + 90.0]), 360.0)
+    ends = np.mod(np.asarray(ends_deg, float), 360.0)
     ends = np.sort(np.where(ends > 360.0 - 1e-9, 0.0, ends))
     pts: list[float] = []
     for e in ends:
@@ -175,16 +183,18 @@ def tension_map(design: Design, theta_L=None, psi_dot=None) -> TensionMap:
             pts.append(float(e))
     if len(pts) > 1 and pts[0] + 360.0 - pts[-1] <= 1e-9:
         pts.pop()
+    if not pts:  # no zone ends: one taut set everywhere
+        return (Sector(0.0, 360.0, taut(0.0), closed_start=True),)
     raw: list[Sector] = []  # open intervals and points, alternating, covering [0, 360)
     if pts[0] > 0.0:
-        raw.append(Sector(0.0, pts[0], _taut_set(zones, 0.5 * (pts[-1] - 360.0 + pts[0]))))
+        raw.append(Sector(0.0, pts[0], taut(0.5 * (pts[-1] - 360.0 + pts[0]))))
     for i, p in enumerate(pts):
         nxt = pts[i + 1] if i + 1 < len(pts) else 360.0
-        raw.append(Sector(p, p, _taut_set(zones, p)))
+        raw.append(Sector(p, p, taut(p)))
         mid = 0.5 * (p + nxt) if i + 1 < len(pts) else 0.5 * (p + pts[0] + 360.0)
         if nxt > p:
-            raw.append(Sector(p, nxt, _taut_set(zones, mid)))
-    return TensionMap(design.n_wires, float(gamma), zones, _fold_points(raw))
+            raw.append(Sector(p, nxt, taut(mid)))
+    return _fold_points(raw)
 
 
 def _fold_points(raw: list[Sector]) -> tuple[Sector, ...]:
