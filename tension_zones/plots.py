@@ -208,7 +208,8 @@ def _draw_count_legend(ax, present, rays: bool, many: bool) -> None:
 
 def plot_tradeoff(result: dict, path):
     """Each objective term of the best design of every wire count against the count (several
-    segments: of every combination of counts, ``"4+3"``; no deflection panel, it has no such term)."""
+    segments: of every combination of counts, ``"4+3"``); a deflection not computed (weight 0) is NaN,
+    an empty panel."""
     rows = [r for r in result["per_wire_count"] if "objective" in r]
     terms = [
         ("worst_position_uncertainty_mm", "worst position uncertainty (mm)"),
@@ -216,8 +217,6 @@ def plot_tradeoff(result: dict, path):
         ("objective", "objective"),
     ]
     several = result.get("segments", 1) > 1
-    if several:
-        del terms[1]
     fig, axes = plt.subplots(1, len(terms), figsize=(4 * len(terms), 3.8))
     n = list(range(len(rows))) if several else [r["n_wires"] for r in rows]
     feas = [r["feasible"] for r in rows]

@@ -100,9 +100,8 @@ def _files(tmp):
         "step_beyond": {"theta_L_deg": [5, 85, 100]},
     }.items():
         (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
-    # several segments: a key twice in a segment, the deflection term, a bad segment of a space
+    # several segments: a key twice in a segment, a bad segment of a space
     (tmp / "two_dup.json").write_text('{"segments": [{}, {"length_mm": 20, "length_mm": 30}]}')
-    (tmp / "two_defl.json").write_text(json.dumps({"segments": [{}, {}]}))
     (tmp / "two_space.json").write_text(json.dumps({"segments": [{"n_wires": 4}, {"pitch_radius_mm": [3, 1]}]}))
     # calibration inputs, cut from the shipped examples
     design = json.loads(tz.example_path("synthetic/nominal_3w.design.json").read_text())
@@ -517,14 +516,6 @@ CLI = [
         "opt-segment-duplicate-key",
         OPT + ["{tmp}/two_dup.json", "--out", "{tmp}/o"],
         "two_dup.json': key 'segments[1].length_mm' appears twice (JSON keys must be unique)",
-    ),
-    (
-        "opt-robot-deflection",
-        OPT + ["{tmp}/two_defl.json", "--out", "{tmp}/o"],
-        (
-            "scenario key 'weights.deflection': a robot's deflection under load is not available to the optimiser "
-            "for several segments yet; set it to 0"
-        ),
     ),
     (
         "explore-segment-range",

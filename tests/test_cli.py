@@ -264,7 +264,7 @@ def test_optimize_takes_the_shipped_scenario_of_two_segments(tmp_path, capsys):
     res = json.loads((out / "result.json").read_text())
     assert res["segments"] == 2 and [r["n_wires"] for r in res["per_wire_count"]] == [[4, 3], [4, 4]]
     assert not res["per_wire_count"][0]["feasible"]  # three even wires leave sectors of one taut wire
-    assert res["best"]["worst_deflection_mm"] is None  # not computed: no deflection term for a robot
+    assert res["best"]["worst_deflection_mm"] > 0 and res["best"]["statics_infeasible_poses"] == 0
     robot = tz.Robot.from_dict(res["best"]["design"])
     assert robot.n_wires_per_segment == (4, 4) and float(robot.segments[0].pitch_radius) == 4.0
     for name in ("tradeoff.png", "convergence.png"):

@@ -478,7 +478,9 @@ def _two(**change):
 
 @pytest.mark.slow
 def test_a_robot_s_optimum_beats_its_start_and_is_what_a_fresh_evaluation_gives():
-    sc = _two()
+    """With the deflection term on (a tip load): the best robot's objective and pieces are what a fresh
+    evaluation of its design file gives, and no worse than the mid-range start's."""
+    sc = _two(load_N=[0.5, 0.0, 0.0], weights={"position_uncertainty": 1.0, "deflection": 1.0, "wire_count": 0.05})
     res = opt.optimize(sc, progress=False)
     best = res["best"]
     assert res["segments"] == 2 and best["feasible"] and best["n_wires"] == [4, 4]
@@ -486,6 +488,8 @@ def test_a_robot_s_optimum_beats_its_start_and_is_what_a_fresh_evaluation_gives(
     again = opt.evaluate_design(sc, robot)
     assert again["objective"] == pytest.approx(best["objective"], rel=1e-9)
     assert again["worst_position_uncertainty_mm"] == pytest.approx(best["worst_position_uncertainty_mm"], rel=1e-9)
+    assert again["worst_deflection_mm"] == pytest.approx(best["worst_deflection_mm"], rel=1e-9)
+    assert best["worst_deflection_mm"] > 0 and best["statics_infeasible_poses"] == 0
     # start 0 is every box variable mid-range: the optimum is no worse
     b = opt._chain_bounds(sc, (4, 4))
     ends = {"pitch_radius": (b.r_lo, b.r_hi), "wire_stiffness": (b.k_lo, b.k_hi), "preload": (b.p_lo, b.p_hi)}
@@ -519,6 +523,18 @@ def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
     assert opt._run_starts._cache_size() == before
 
 
-def test_a_robot_s_deflection_weight_is_refused_in_one_line():
-    with pytest.raises(ValueError, match="'weights.deflection': a robot's deflection under load is not available"):
-        parse_scenario({**TWO, "weights": {"deflection": 1.0}})
+def test_a_robot_s_deflection_term_is_its_worst_reduced_deflection_under_the_tip_load():
+    """The objective's pieces against the robot's compliance (``config_compliance``, itself checked against
+    an independent reference in test_chain) at each of the task's configurations, under a load off every
+    axis; a three-wire distal segment cannot steer every configuration of the disk, so infeasible."""
+    weights = {"position_uncertainty": 1.0, "deflection": 2.0, "wire_count": 0.05}
+    sc = parse_scenario({**TWO, "load_N": [0.5, 0.2, -0.3], "weights": weights})
+    robot = with_numbers(opt._base_robot(sc, (4, 3)), pitch_radius=[3.0, 2.0], preload=[0.0, 0.5])
+    row = opt.evaluate_design(sc, robot)
+    c = jax.vmap(lambda B: tz.config_compliance(robot, B, sc.load))(sc.configs)
+    ok = np.asarray(c["feasible"]) & np.isfinite(np.asarray(c["deflection_mm_reduced"]))
+    worst = np.max(np.where(ok, c["deflection_mm_reduced"], 0.0))
+    assert row["worst_deflection_mm"] == pytest.approx(worst, rel=1e-12) and worst > 0
+    assert row["statics_infeasible_poses"] == int(np.sum(~ok))
+    assert row["objective"] == pytest.approx(row["worst_position_uncertainty_mm"] + 2.0 * worst + 0.05 * 7, rel=1e-12)
+    assert row["spread_violations"] > 0 and not row["feasible"]

@@ -33,8 +33,8 @@ is what is reported, and the best exact objective seen is kept. Several random s
 is a robot (``_layout``: interleaved wires, each proximal disk's hole circle), optimised by the same
 loop (:func:`_run_starts` with a :class:`_Chain` problem) over each segment's pitch radius, wire
 stiffness and preload, for ``w_p * max dp_max_reduced + w_n * N`` over the task's configurations,
-with controllability checked at each (:func:`chain_spread`). A robot's deflection term is not
-available yet; it plugs in at :func:`_config_terms`.
+and ``w_d * max deflection`` under the task's tip load (pull-only tensions over the chain), with
+controllability checked at each configuration (:func:`chain_spread`).
 """
 
 from __future__ import annotations
@@ -175,10 +175,14 @@ def _pose_terms(design: Design, theta_L, delta, task: _Task, with_defl: bool = T
     dp = pose_measures(design, theta_L, delta, task.dq, mask=mask)["dp_max"]
     if not with_defl:  # static: a zero deflection weight skips the statics entirely
         return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
-    c = compliance_pose(design, theta_L, delta, task.load)
+    return dp, *_reduced_deflection(compliance_pose(design, theta_L, delta, task.load))
+
+
+def _reduced_deflection(c: dict):
+    """(reduced deflection (mm), statics feasible) of a compliance result: 0 where the wires cannot hold
+    the load pulling only, or the deflection is not finite."""
     ok = c["feasible"] & jnp.isfinite(c["deflection_mm_reduced"])
-    defl = jnp.where(ok, c["deflection_mm_reduced"], 0.0)  # double-where: no NaN in gradients
-    return dp, defl, ok
+    return jnp.where(ok, c["deflection_mm_reduced"], 0.0), ok  # double-where: no NaN in gradients
 
 
 def zone_boundaries(design: Design):
@@ -411,6 +415,7 @@ class _ChainTask:
 
     configs: jax.Array  # (M, S, 2) rad
     dq: jax.Array
+    load: jax.Array  # (3,) N, base frame
     w_position: jax.Array
     w_deflection: jax.Array
     w_wires: jax.Array
@@ -443,28 +448,33 @@ def chain_spread(robot: Robot, B):
     return jnp.linalg.svd(U * m[:, None], compute_uv=False)[-1]
 
 
-def _config_terms(robot: Robot, B, task: _ChainTask):
-    """(dp_max (mm), deflection (mm), statics feasible) at one configuration ``B`` (S, 2): the reduced
-    bound of the wires in tension (``config_measures``). The deflection term plugs in here (a robot's
-    compliance under the task's load, ``model.config_compliance``); until the optimiser takes it, 0 and
-    feasible: a scenario of several segments with a deflection weight is refused when it is read."""
+def _config_terms(robot: Robot, B, task: _ChainTask, with_defl: bool = True):
+    """(dp_max (mm), reduced deflection (mm), statics feasible) at one configuration ``B`` (S, 2), as
+    :func:`_pose_terms` for a segment: the reduced bound of the wires in tension (``config_measures``)
+    and the reduced deflection under the task's tip load (``model.config_compliance``, pull-only
+    tensions over the whole chain)."""
     from ..analysis._chain import config_measures
+    from ..model._chain_statics import config_compliance
 
     dp = config_measures(robot, B, task.dq, robot.tension_mask(B))["dp_max"]
-    return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
+    if not with_defl:  # static: a zero deflection weight skips the statics entirely
+        return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
+    return dp, *_reduced_deflection(config_compliance(robot, B, task.load))
 
 
-def _sample_terms(robot: Robot, task: _ChainTask, with_defl: bool = False):
+def _sample_terms(robot: Robot, task: _ChainTask, with_defl: bool = True):
     """Per-configuration terms over the task's configurations, each (M,), and the controllability
     check at each configuration (:func:`chain_spread`)."""
-    dp, defl, ok = jax.vmap(lambda B: _config_terms(robot, B, task))(task.configs)
+    dp, defl, ok = jax.vmap(lambda B: _config_terms(robot, B, task, with_defl))(task.configs)
     spr = jax.vmap(lambda B: chain_spread(robot, B))(task.configs)
     return dp, defl, ok, _shortfall(spr, task.min_spread)
 
 
 def _chain_task(sc: Scenario) -> _ChainTask:
     f = lambda x: jnp.asarray(x, float)
-    return _ChainTask(f(sc.configs), f(sc.dq), f(sc.w_position), f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread))
+    return _ChainTask(
+        f(sc.configs), f(sc.dq), f(sc.load), f(sc.w_position), f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread)
+    )
 
 
 def _chain_bounds(sc: Scenario, counts) -> _ChainBounds | None:
@@ -529,7 +539,7 @@ class _Chain:
     pitch radius, wire stiffness and preload (a variable where its range is not one value)."""
 
     counts: tuple[int, ...]
-    with_defl: bool = False  # a robot's deflection term is not available yet (the scenario refuses it)
+    with_defl: bool
 
     @property
     def wires(self) -> int:
@@ -705,7 +715,7 @@ def _run_chain(sc: Scenario, counts: tuple[int, ...], key):
         base,
         jnp.asarray(sc.learning_rate),
         jnp.asarray(sc.sharpness),
-        problem=_Chain(counts),
+        problem=_Chain(counts, sc.w_deflection > 0),
         steps=sc.steps,
     )
     ((r, k, p), exact, pieces), i = _best_start(best, out)
@@ -769,7 +779,7 @@ def evaluate_design(sc: Scenario, design: Design | Robot) -> dict[str, Any]:
     if isinstance(design, Robot):
         if design.n_segments != len(sc.segments):
             raise ValueError(f"the robot has {design.n_segments} segment(s), the scenario {len(sc.segments) or 1}")
-        _, exact, pieces = _objective_jit(design, _chain_task(sc), design.n_wires, 1.0, False)
+        _, exact, pieces = _objective_jit(design, _chain_task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
         return _chain_row(sc, design, exact, pieces)
     if sc.segments:
         raise ValueError(f"the scenario has {len(sc.segments)} segments: evaluate a Robot")

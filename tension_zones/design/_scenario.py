@@ -379,15 +379,10 @@ def configurations(s: dict, kind: str = "scenario") -> np.ndarray:
     return config_samples(len(s["segments"]), n, bend)
 
 
-def _several(s: dict, task: dict) -> None:
-    """Refuse what the optimiser does for one segment only: free wire angles, the deflection term."""
+def _several(s: dict) -> None:
+    """Refuse what the optimiser does for one segment only: free wire angles."""
     if s["free_wire_angles"]:
         raise _err("free_wire_angles", "several segments' wires are evenly spaced and interleaved; set it to false")
-    if task["w_deflection"] > 0:
-        raise _err(
-            "weights.deflection",
-            "a robot's deflection under load is not available to the optimiser for several segments yet; set it to 0",
-        )
 
 
 def parse_scenario(d: dict) -> Scenario:
@@ -402,7 +397,7 @@ def parse_scenario(d: dict) -> Scenario:
     if not several:
         fields = _segment_fields(entries[0][0], where_given("scenario", 0, entries[0][1]))
         return _checked(Scenario(**fields, **task, raw=s), "scenario segments[0]")
-    _several(s, task)
+    _several(s)
     configs = configurations(s)
     segments = tuple(
         _checked(
