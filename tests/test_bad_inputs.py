@@ -800,9 +800,17 @@ API = [
         "space key 'wire_angle_offset_deg': several segments' wires are evenly spaced and interleaved",
     ),
     (
-        "space-load-of-several",
-        lambda: tz.parse_space({"segments": [{}, {}], "load_N": [1.0, 0.0, 0.0]}),
-        "space key 'load_N': a robot's compliance statistics are not available to explore yet",
+        "space-load-of-too-many-wires",
+        lambda: tz.parse_space({"segments": [{"n_wires": [4, 8]}, {"n_wires": 5}], "load_N": [1.0, 0.0, 0.0]}),
+        (
+            "space key 'load_N': a robot's statics enumerate 2^N sets of taut wires: at most 12 wires in all, the "
+            "segments' counts give up to 13; set it to null or use fewer wires"
+        ),
+    ),
+    (
+        "scenario-deflection-of-too-many-wires",
+        lambda: tz.parse_scenario({"segments": [{"n_wires": [7]}, {"n_wires": [6]}]}),
+        "scenario key 'weights.deflection': a robot's statics enumerate 2^N sets of taut wires: at most 12 wires",
     ),
     (
         "space-grid-of-several",

@@ -25,6 +25,7 @@ from .._io import LOCK_NAME, atomic_path, folder_lock
 from ..analysis._chain import config_metrics
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
+from ..model._chain_statics import config_compliance
 from ..model._design import Design, read_json
 from ..model._robot import Robot
 from ..model._statics import as_wrench, compliance_pose
@@ -60,6 +61,12 @@ SPAN_TOL = 1e-9
 def _loaded_pose(design: Design, theta_L, delta, dq, wrench):
     """:func:`_kinematic_pose` and the tension-only statics under ``wrench`` (tension_zones/MODEL.md Sec. 4)."""
     return {**_kinematic_pose(design, theta_L, delta, dq), **compliance_pose(design, theta_L, delta, wrench)}
+
+
+def _loaded_config(robot: Robot, B, dq, wrench):
+    """:func:`_kinematic_config` and the robot's tension-only statics under ``wrench``
+    (:func:`~tension_zones.model.config_compliance`: pull-only tensions over the whole chain)."""
+    return {**_kinematic_config(robot, B, dq), **config_compliance(robot, B, wrench)}
 
 
 def _stats(loaded: bool) -> tuple[tuple[str, str, str], ...]:
@@ -132,7 +139,7 @@ def explore_designs(
 
     Args:
         designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,);
-            or robots of one structure, a :class:`Robot` likewise (no load).
+            or robots of one structure, a :class:`Robot` likewise.
         theta_L, delta: the grid's axes (rad); robots: the configurations ``B`` (M, S, 2) and ``None``.
         dq: joint-level uncertainty (mm), traced.
         load: ``None`` or the tip force (3,) / wrench (6,) (N, N mm, base frame), traced: adds the
@@ -145,11 +152,10 @@ def explore_designs(
     design (tested to 1e-12).
     """
     args = (np.float64(dq),) if load is None else (np.float64(dq), np.asarray(as_wrench(load)))
-    fn: Callable = _kinematic_pose if load is None else _loaded_pose
     if isinstance(designs, Robot):
-        if load is not None:
-            raise ValueError("a batch of robots has no compliance statistics yet: load must be None")
-        fn = _kinematic_config
+        fn: Callable = _kinematic_config if load is None else _loaded_config
+    else:
+        fn = _kinematic_pose if load is None else _loaded_pose
     return sweep_designs(
         fn,
         designs,
@@ -179,6 +185,9 @@ POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
 #: wires in all (the exact bound's pair terms; XLA's memory analysis, two and three segments of 3 to 8
 #: wires each, kept above it).
 CONFIG_BYTES, CONFIG_BYTES_N3 = 4000, 30
+#: With a load, ``CONFIG_BYTES_STATICS x 2^N x N^2`` bytes more per configuration (the tensions' 2^N free
+#: sets, ``model.config_compliance``; XLA's memory analysis, 3+3 to 4+4+4 wires, at most 7.6, kept above).
+CONFIG_BYTES_STATICS = 10
 
 
 def chunk_memory(space: Space, n) -> int:
@@ -186,7 +195,10 @@ def chunk_memory(space: Space, n) -> int:
     several segments: ``n`` a combination of counts, see ``CONFIG_BYTES``)."""
     devices = len(jax.local_devices())
     if space.segments:
-        per_pose = CONFIG_BYTES + CONFIG_BYTES_N3 * sum(n) ** 3
+        N = sum(n)
+        per_pose = (
+            CONFIG_BYTES + CONFIG_BYTES_N3 * N**3 + (0 if space.load is None else CONFIG_BYTES_STATICS * 2**N * N**2)
+        )
     else:
         per_pose = POSE_BYTES + POSE_BYTES_N2 * n * n
     return devices * space.poses_per_chunk * per_pose + space.designs_per_chunk * DESIGN_BYTES
@@ -215,12 +227,21 @@ def work_seconds(space: Space) -> float | None:
     if jax.default_backend() != "cpu":
         return None
     if space.segments:
-        cost = lambda n: (max(sum(n), RATE_CHAIN_WIRES) / RATE_CHAIN_WIRES) ** 3 / RATE_CHAIN
+        cost = lambda n: _chain_cost(sum(n), space.load is not None) / RATE_CHAIN
     else:
         rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
         cost = lambda n: max(n, RATE_WIRES) / RATE_WIRES / rate
     evals = sum(space.count(n) * space.n_poses * cost(n) for n in space.n_wires)
     return evals / jax.process_count()
+
+
+def _chain_cost(N: int, loaded: bool) -> float:
+    """A robot configuration's cost against one of ``RATE_CHAIN_WIRES`` wires, kinematic: ``(N/6)^3``
+    (the exact bound); with a load ``2^N N^2`` times that of 6 wires more (the tensions' free sets).
+    Both kept at or below the rates of benchmarks/README.md's "Robots" table."""
+    r = max(N, RATE_CHAIN_WIRES)
+    cost = (r / RATE_CHAIN_WIRES) ** 3
+    return cost + (2**r * r**2) / (2**RATE_CHAIN_WIRES * RATE_CHAIN_WIRES**2) if loaded else cost
 
 
 def about(seconds: float) -> str:

@@ -406,7 +406,25 @@ def parse_scenario(d: dict) -> Scenario:
         )
         for j, (values, entry) in enumerate(entries)
     )
+    if task["w_deflection"] > 0:
+        check_statics_wires([seg.n_wires for seg in segments], "weights.deflection", "scenario", "set it to 0")
     return dataclasses.replace(segments[0], segments=segments, configs=configs)
+
+
+def check_statics_wires(counts, key: str, kind: str, instead: str) -> None:
+    """Refuse, naming ``key``, segments' wire counts (one sequence of choices per segment) whose largest
+    robot has more wires than a robot's statics take (``MAX_CHAIN_WIRES``: the tensions enumerate
+    ``2^N`` free sets)."""
+    from ..model._chain_statics import MAX_CHAIN_WIRES
+
+    most = sum(max(c) for c in counts)
+    if most > MAX_CHAIN_WIRES:
+        raise _err(
+            key,
+            f"a robot's statics enumerate 2^N sets of taut wires: at most {MAX_CHAIN_WIRES} wires in all, the "
+            f"segments' counts give up to {most}; {instead} or use fewer wires",
+            kind,
+        )
 
 
 def load_scenario(path) -> Scenario:

@@ -39,6 +39,7 @@ from ._scenario import (
     _merge,
     _num,
     _wire_counts,
+    check_statics_wires,
     configurations,
     only_for,
     segment_entries,
@@ -368,16 +369,16 @@ def _one_segment(d: dict, raw: dict, entry) -> Space:
 
 def _several_segments(d: dict, raw: dict, entries) -> Space:
     """A space of several segments: each segment's fields, every combination of their wire counts,
-    and the configurations; what one segment alone takes (wire offsets, a load) refused."""
+    and the configurations; what one segment alone takes (wire offsets) refused."""
     if OFFSET in d:
         raise _err(OFFSET, "several segments' wires are evenly spaced and interleaved; leave it out", KIND)
-    if raw["load_N"] is not None:
-        raise _err("load_N", "a robot's compliance statistics are not available to explore yet; set it to null", KIND)
     counts, segs = [], []
     for j, (values, entry) in enumerate(entries):
         where = where_given(KIND, j, entry)
         counts.append(_wire_counts("n_wires", values["n_wires"], where("n_wires")))
         segs.append(_segment_fields(values, where, f"{KIND} segments[{j}]"))
+    if raw["load_N"] is not None:
+        check_statics_wires(counts, "load_N", KIND, "set it to null")
     structures = tuple(itertools.product(*counts))
     if len(structures) > MAX_STRUCTURES:
         raise _err(
@@ -391,7 +392,7 @@ def _several_segments(d: dict, raw: dict, entries) -> Space:
         fields=segs[0],
         theta_L=empty,
         delta=empty,
-        load=None,
+        load=_load(raw),
         segments=tuple(segs),
         configs=configurations(raw, KIND),
         **_shared(d, raw),
