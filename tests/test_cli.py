@@ -256,6 +256,28 @@ def test_maps_of_a_robot_draw_each_segment_with_the_others_straight_and_bent(tmp
     assert out.stat().st_size > 50_000
 
 
+def test_optimize_starts_from_a_design_file_and_refuses_a_mismatch_in_one_line(tmp_path, capsys):
+    """``optimize --design``: the robot's values where the scenario leaves them out, the robot itself as
+    ``start`` in result.json and on the first line; a scenario of another segment count: one line."""
+    design = tz.example_path("design/two_segments.design.json")
+    scenario = tmp_path / "s.json"
+    task = {"max_bend_deg": 40.0, "samples": 16, "weights": {"deflection": 0.0}, "optimizer": {"starts": 1, "steps": 2}}
+    scenario.write_text(json.dumps({**task, "pitch_radius_mm": [1.0, 3.0]}))
+    argv = ["optimize", "--scenario", str(scenario), "--design", str(design), "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 0
+    assert capsys.readouterr().out.startswith(f"start ({design}): objective ")
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["start"]["design"] == tz.Robot.from_json(design).to_dict()
+    scenario.write_text(json.dumps({**task, "segments": [{}]}))
+    assert main([*argv, "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "tension-zones: error: scenario key 'segments': has 1 entry; the design file has 2 segment(s): one "
+        "entry each, or leave it out\n"
+    )
+    assert not (tmp_path / "o2").exists()
+
+
 def test_optimize_takes_the_shipped_scenario_of_two_segments(tmp_path, capsys):
     out = tmp_path / "opt"
     scenario = tz.example_path("design/two_segments.scenario.json")

@@ -516,7 +516,8 @@ def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
         "max_bend_deg": 80.0,
         "joint_uncertainty_mm": 0.7,
         "min_spread": 0.4,
-        "weights": {"position_uncertainty": 2.0, "deflection": 0.0, "wire_count": 0.3},
+        "load_N": [0.0, 1.0, -0.5],
+        "weights": {"position_uncertainty": 2.0, "deflection": 0.5, "wire_count": 0.3},
         "optimizer": {**TWO["optimizer"], "learning_rate": 0.2, "seed": 5},
     }
     opt.optimize(parse_scenario(other), progress=False)
@@ -538,3 +539,34 @@ def test_a_robot_s_deflection_term_is_its_worst_reduced_deflection_under_the_tip
     assert row["statics_infeasible_poses"] == int(np.sum(~ok))
     assert row["objective"] == pytest.approx(row["worst_position_uncertainty_mm"] + 2.0 * worst + 0.05 * 7, rel=1e-12)
     assert row["spread_violations"] > 0 and not row["feasible"]
+
+
+def test_a_scenario_for_a_robot_takes_what_it_leaves_out_from_the_robot():
+    """``for_robot``: a segment's own key first, then the file's top level, then the robot's value (a
+    one-value range: fixed); the joint uncertainty is the largest play unless the scenario sets it."""
+    robot = tz.Robot.from_json(tz.example_path("design/two_segments.design.json"))
+    d = {"segments": [{}, {"pitch_radius_mm": [1.0, 2.0]}], "n_wires": [3, 4], "max_bend_deg": 40.0, "samples": 8}
+    sc = parse_scenario(d, robot, play=[0.1, 0.3, 0.0, 0.2, 0.1, 0.1])
+    a, b = robot.segments
+    assert [s.n_wires for s in sc.segments] == [(3, 4), (3, 4)]  # the file's top level
+    assert sc.segments[0].pitch_radius == (float(a.pitch_radius),) * 2  # the robot's, fixed
+    assert sc.segments[1].pitch_radius == (1.0, 2.0)  # the segment's own
+    assert [s.length for s in sc.segments] == [float(a.length), float(b.length)]
+    assert [s.backbone_EI for s in sc.segments] == [float(a.backbone_EI), float(b.backbone_EI)]
+    assert sc.dq == pytest.approx(0.3)
+    assert parse_scenario({**d, "joint_uncertainty_mm": 0.5}, robot, play=[0.3]).dq == 0.5
+    with pytest.raises(ValueError, match="'segments': has 3 entries; the design file has 2 segment"):
+        parse_scenario({**d, "segments": [{}, {}, {}]}, robot)
+
+
+def test_optimize_from_a_robot_reports_the_robot_itself_as_the_start():
+    """``optimize(..., start=robot)``: ``start`` is the robot as it is (its own routing) under the
+    scenario, what ``evaluate_design`` gives; fixed values stay the robot's in every result."""
+    robot = tz.Robot.from_json(tz.example_path("design/two_segments.design.json"))
+    d = {"max_bend_deg": 40.0, "samples": 16, "weights": {"deflection": 0.0}, "optimizer": {"starts": 1, "steps": 2}}
+    sc = parse_scenario(d, robot)
+    res = opt.optimize(sc, progress=False, start=robot)
+    assert res["start"] == opt.evaluate_design(sc, robot)
+    assert res["start"]["design"] == robot.to_dict()
+    assert [r["n_wires"] for r in res["per_wire_count"]] == [list(robot.n_wires_per_segment)]
+    assert res["per_wire_count"][0]["pitch_radius_mm"] == [float(s.pitch_radius) for s in robot.segments]

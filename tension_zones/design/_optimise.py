@@ -738,12 +738,14 @@ def _fits(sc: Scenario, n) -> bool:
     return r_lo <= r_hi
 
 
-def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
+def optimize(sc: Scenario, progress: bool = True, start: Design | Robot | None = None) -> dict[str, Any]:
     """Optimise every candidate wire count (several segments: every combination); return the
     ``result.json`` dictionary.
 
     ``history`` (per wire count: the best exact objective after each step, best start) is included
-    for the convergence plot.
+    for the convergence plot. ``start``: the design the search starts from (``optimize --design``, a
+    calibrated robot, with the scenario of :func:`~._scenario.for_robot`), evaluated as it is under
+    the scenario (its own layout and routing) into ``start``, to set the best against.
     """
     from tqdm.auto import tqdm
 
@@ -769,6 +771,10 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
         "evaluations": evaluations,
         "history": hist,
     }
+    if start is not None:
+        if isinstance(start, Robot) and start.n_segments == 1:
+            start = start.segments[0]
+        out["start"] = evaluate_design(sc, start)
     return {"segments": len(sc.segments), **out} if sc.segments else out
 
 

@@ -385,8 +385,51 @@ def _several(s: dict) -> None:
         raise _err("free_wire_angles", "several segments' wires are evenly spaced and interleaved; set it to false")
 
 
-def parse_scenario(d: dict) -> Scenario:
-    """Validate a scenario dictionary and fill in the defaults (one segment, or several: ``segments``)."""
+def for_robot(d: dict, robot, play=None) -> dict:
+    """The scenario dictionary ``d`` starting from a given robot (``optimize --design``): each segment's
+    values the scenario leaves out (in its ``segments`` entry and at the top level) are the robot's, a
+    range of one value (fixed): its wire count, length, pitch radius, wire stiffness, backbone EI and
+    preload. The joint uncertainty, where the scenario leaves it out, is the largest of ``play`` (mm,
+    per wire: a calibrated robot's identified play, a bound for every wire). ``robot``: a
+    :class:`~tension_zones.model.Robot` (or a one-segment ``Design``)."""
+    segs = list(getattr(robot, "segments", [robot]))
+    entries = d.get("segments")
+    if entries is None:
+        entries = [{} for _ in segs]
+    elif not isinstance(entries, list) or len(entries) != len(segs):
+        got = (
+            (f"{len(entries)} entries" if len(entries) != 1 else "1 entry")
+            if isinstance(entries, list)
+            else repr(entries)
+        )
+        raise _err(
+            "segments", f"has {got}; the design file has {len(segs)} segment(s): one entry each, or leave it out"
+        )
+    out = {**d, "segments": [_with_segment(e, seg, d) if isinstance(e, dict) else e for e, seg in zip(entries, segs)]}
+    if "joint_uncertainty_mm" not in d and play is not None and max(play, default=0.0) > 0:
+        out["joint_uncertainty_mm"] = float(max(play))
+    return out
+
+
+def _with_segment(entry: dict, seg, top: dict) -> dict:
+    """A ``segments`` entry with the design's segment ``seg`` (a ``Design``) filling the keys neither it
+    nor the file's top level ``top`` gives."""
+    own = {
+        "n_wires": [int(seg.n_wires)],
+        "length_mm": float(seg.length),
+        "pitch_radius_mm": [float(seg.pitch_radius)] * 2,
+        "wire_stiffness_N_per_mm": [float(seg.wire_stiffness)] * 2,
+        "backbone_EI_Nmm2": float(seg.backbone_EI),
+        "preload_N": float(seg.preload),
+    }
+    return {**{k: v for k, v in own.items() if k not in top}, **entry}
+
+
+def parse_scenario(d: dict, robot=None, play=None) -> Scenario:
+    """Validate a scenario dictionary and fill in the defaults (one segment, or several: ``segments``);
+    with ``robot``, starting from it (:func:`for_robot`)."""
+    if robot is not None:
+        d = for_robot(d, robot, play)
     s = with_defaults(d, DEFAULTS, "scenario", "a scenario", [k for k, v in DEFAULTS.items() if isinstance(v, dict)])
     entries = segment_entries(s, SEGMENT_KEYS, "scenario", ("constraints",))
     several = entries is not None and len(entries) > 1
@@ -427,5 +470,6 @@ def check_statics_wires(counts, key: str, kind: str, instead: str) -> None:
         )
 
 
-def load_scenario(path) -> Scenario:
-    return parse_scenario(read_json(path, "scenario file"))
+def load_scenario(path, robot=None, play=None) -> Scenario:
+    """:func:`parse_scenario` of a scenario file."""
+    return parse_scenario(read_json(path, "scenario file"), robot, play)
