@@ -208,21 +208,54 @@ def cmd_reproduce(args) -> None:
 
 
 # --- optimize -----------------------------------------------------------------------
+def _numbers(values) -> str:
+    """Per-segment numbers, comma-separated."""
+    return ", ".join(f"{v:.4g}" for v in values)
+
+
+def _optimize_start(args):
+    """``optimize --design FILE``: the robot the search starts from and its calibrated play of each wire
+    (None where the file has none); ``(None, None)`` without the flag."""
+    from .model import Robot, read_json
+
+    if args.design is None:
+        return None, None
+    try:
+        robot = Robot.from_json(args.design)
+        play = Robot.calibrated_block(read_json(args.design, "design file")).get("wire_play_mm")
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    return robot, play
+
+
 def cmd_optimize(args) -> None:
-    from .design._optimise import optimize
+    from .design._optimise import optimize, wires_label
     from .design._scenario import load_scenario
     from .plots import OUTPUT_FILES, write_outputs
 
+    start, play = _optimize_start(args)
     try:
-        sc = load_scenario(args.scenario)
+        sc = load_scenario(args.scenario, start, play)
     except ValueError as e:
         raise CLIError(str(e)) from None
     out = _check_out_dir(args.out, args.force, OUTPUT_FILES)
-    result = optimize(sc, progress=not args.quiet)
+    result = optimize(sc, progress=not args.quiet, start=start)
     paths = write_outputs(result, out)
     best = result["best"]
+    if start is not None:
+        s = result["start"]
+        print(
+            f"start ({args.design}): objective {s['objective']:.4g}, worst position uncertainty "
+            f"{s['worst_position_uncertainty_mm']:.4g} mm" + ("" if s["feasible"] else " (infeasible)")
+        )
     if best is None:
         print("no feasible design: see result.json for each wire count's violations")
+    elif "design" in best:  # several segments: per segment, proximal first
+        print(
+            f"best: {wires_label(best['n_wires'])} wires, r = {_numbers(best['pitch_radius_mm'])} mm, "
+            f"k_w = {_numbers(best['wire_stiffness_N_per_mm'])} N/mm, preload = {_numbers(best['preload_N'])} N, "
+            f"objective {best['objective']:.4g}"
+        )
     else:
         print(
             f"best: {best['n_wires']} wires, r = {best['pitch_radius_mm']:.4g} mm, "
@@ -964,6 +997,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--scenario",
         required=True,
         help="scenario JSON (keys: tension_zones/design/README.md; examples: tension-zones examples)",
+    )
+    o.add_argument(
+        "--design",
+        help="start from this robot (a design file, e.g. a calibration's calibrated.design.json): each "
+        "segment's values the scenario leaves out are the robot's, fixed; its calibrated play the joint "
+        "uncertainty; result.json's 'start' is the robot itself under the scenario",
     )
     o.add_argument("--out", required=True, help="output folder (result.json, tradeoff.png, ...)")
     _add_force(o, "an earlier result in --out")

@@ -31,8 +31,8 @@ import numpy as np
 from matplotlib.patches import Wedge
 
 from ._io import staged_folder, write_json
-from .design._explore import STATS, UNITS, objective, pareto_front, write_csv
-from .design._optimise import INFEASIBLE_RANK
+from .design._explore import STATS, UNITS, objective, pareto_front, structure_groups, write_csv
+from .design._optimise import INFEASIBLE_RANK, wires_label
 from .model._zones import TensionMap
 
 
@@ -207,16 +207,20 @@ def _draw_count_legend(ax, present, rays: bool, many: bool) -> None:
 
 
 def plot_tradeoff(result: dict, path):
-    """Each objective term of the best design of every wire count against the count."""
+    """Each objective term of the best design of every wire count against the count (several
+    segments: of every combination of counts, ``"4+3"``); a deflection not computed (weight 0) is NaN,
+    an empty panel."""
     rows = [r for r in result["per_wire_count"] if "objective" in r]
-    fig, axes = plt.subplots(1, 3, figsize=(12, 3.8))
-    n = [r["n_wires"] for r in rows]
+    terms = [
+        ("worst_position_uncertainty_mm", "worst position uncertainty (mm)"),
+        ("worst_deflection_mm", "worst reduced deflection (mm)"),
+        ("objective", "objective"),
+    ]
+    several = result.get("segments", 1) > 1
+    fig, axes = plt.subplots(1, len(terms), figsize=(4 * len(terms), 3.8))
+    n = list(range(len(rows))) if several else [r["n_wires"] for r in rows]
     feas = [r["feasible"] for r in rows]
-    for ax, key, label in zip(
-        axes,
-        ("worst_position_uncertainty_mm", "worst_deflection_mm", "objective"),
-        ("worst position uncertainty (mm)", "worst reduced deflection (mm)", "objective"),
-    ):
+    for ax, (key, label) in zip(axes, terms):
         y = [r[key] for r in rows]
         ax.plot(n, y, "-", color="0.6")
         ax.scatter(
@@ -234,14 +238,15 @@ def plot_tradeoff(result: dict, path):
             zorder=3,
             label="infeasible",
         )
-        ax.set_xlabel("number of wires")
+        ax.set_xlabel("wires per segment, proximal first" if several else "number of wires")
         ax.set_ylabel(label)
-        ax.set_xticks(n)
+        ax.set_xticks(n, [wires_label(r["n_wires"]) for r in rows])
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     best = result.get("best")
     fig.suptitle(
-        "Trade-off against the wire count" + (f" (best: {best['n_wires']} wires)" if best else " (no feasible design)")
+        "Trade-off against the wire count"
+        + (f" (best: {wires_label(best['n_wires'])} wires)" if best else " (no feasible design)")
     )
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -275,9 +280,9 @@ def _label(column: str) -> str:
 
 
 def _by_wire_count(table):
-    """``[(n, rows, colour)]`` for each wire count of an exploration table."""
-    counts = sorted(set(np.asarray(table["n_wires"]).tolist()))
-    return [(n, np.asarray(table["n_wires"]) == n, plt.get_cmap("tab10")(i % 10)) for i, n in enumerate(counts)]
+    """``[(n, rows, colour)]`` for each wire count of an exploration table (several segments: each
+    combination, ``n`` its label)."""
+    return [(n, rows, plt.get_cmap("tab10")(i % 10)) for i, (n, rows) in enumerate(structure_groups(table))]
 
 
 def plot_front(table: dict, columns, front, path=None):
@@ -335,11 +340,7 @@ def plot_parallel(table: dict, columns, front, path=None, fields=None, max_lines
         fields = [
             k
             for k in table
-            if k != "design"
-            and k not in STATS
-            and k not in columns
-            and not k.startswith("wire_angle_")
-            and varies(table[k])
+            if k != "design" and k not in STATS and k not in columns and "wire_angle_" not in k and varies(table[k])
         ]
     axes_names = fields + list(columns)
     V = np.stack([np.asarray(table[k], float) for k in axes_names], axis=1)

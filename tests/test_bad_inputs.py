@@ -100,6 +100,9 @@ def _files(tmp):
         "step_beyond": {"theta_L_deg": [5, 85, 100]},
     }.items():
         (tmp / f"{name}.json").write_text(json.dumps({**GOOD_SCENARIO, **change}, allow_nan=True))
+    # several segments: a key twice in a segment, a bad segment of a space
+    (tmp / "two_dup.json").write_text('{"segments": [{}, {"length_mm": 20, "length_mm": 30}]}')
+    (tmp / "two_space.json").write_text(json.dumps({"segments": [{"n_wires": 4}, {"pitch_radius_mm": [3, 1]}]}))
     # calibration inputs, cut from the shipped examples
     design = json.loads(tz.example_path("synthetic/nominal_3w.design.json").read_text())
     (tmp / "d3.json").write_text(json.dumps(design))
@@ -509,6 +512,16 @@ CLI = [
             "of segment 0 (0 deg, radius 4.5 mm); each wire needs its own hole"
         ),
     ),
+    (
+        "opt-segment-duplicate-key",
+        OPT + ["{tmp}/two_dup.json", "--out", "{tmp}/o"],
+        "two_dup.json': key 'segments[1].length_mm' appears twice (JSON keys must be unique)",
+    ),
+    (
+        "explore-segment-range",
+        ["explore", "--space", "{tmp}/two_space.json", "--out", "{tmp}/o"],
+        "space segments[1] key 'pitch_radius_mm': min 3.0 is larger than max 1.0",
+    ),
     ("opt-out-is-file", OPT + ["{tmp}/good.json", "--out", "{tmp}/file.txt"], "must be a folder"),
     ("opt-out-holds-result", OPT + ["{tmp}/good.json", "--out", "{tmp}/run"], "already holds 'result.json'"),
     ("opt-out-no-parent", OPT + ["{tmp}/good.json", "--out", "{tmp}/nope/o"], "does not exist"),
@@ -659,6 +672,11 @@ def _sweep(**kw):
     return lambda: sweep_grid(fn, kw.pop("design", d), th, np.radians([0.0, 90.0]), quiet=True, **kw)
 
 
+def _two_scenario(**change):
+    """A scenario of two segments (the deflection term off), with keys changed."""
+    return lambda: tz.parse_scenario({"segments": [{}, {}], "weights": {"deflection": 0.0}, **change})
+
+
 def _nominal(rows=slice(0, 40), **change):
     """The first samples of the shipped nominal recording, with fields replaced."""
     import dataclasses
@@ -691,6 +709,119 @@ API = [
     ("scenario-strict", lambda: tz.parse_scenario({"strict_controllability": 1}), "true or false"),
     ("scenario-min-spread", lambda: tz.parse_scenario({"min_spread": 2}), "'min_spread'"),
     ("scenario-grid-too-fine", lambda: tz.parse_scenario({"delta_deg": [0, 360, 1e-6]}), "too fine"),
+    ("scenario-segments-empty", _two_scenario(segments=[]), "'segments': must be null or a non-empty list"),
+    ("scenario-segments-object", _two_scenario(segments={"n_wires": 3}), "'segments': must be null or a non-empty"),
+    ("scenario-segment-not-object", _two_scenario(segments=[{}, [3]]), "segments[1] must be a JSON object, got list"),
+    (
+        "scenario-segment-unknown-key",
+        _two_scenario(segments=[{"colour": 1}, {}]),
+        "unknown scenario segments[0] key(s) ['colour']",
+    ),
+    (
+        "scenario-segment-range-length",
+        _two_scenario(segments=[{}, {"pitch_radius_mm": [1, 2, 3]}]),
+        "scenario segments[1] key 'pitch_radius_mm': must be [min, max], got [1, 2, 3]",
+    ),
+    (
+        "scenario-segment-range-order",
+        _two_scenario(segments=[{}, {"wire_stiffness_N_per_mm": [90, 60]}]),
+        "scenario segments[1] key 'wire_stiffness_N_per_mm': min 90.0 is larger than max 60.0",
+    ),
+    (
+        "scenario-segment-counts",
+        _two_scenario(segments=[{"n_wires": [2, 3]}, {}]),
+        "scenario segments[0] key 'n_wires': must be a list of integers from 3 to 16",
+    ),
+    (
+        "scenario-segment-preload-length",
+        _two_scenario(segments=[{}, {"preload_N": [0, 1, 2]}]),
+        "scenario segments[1] key 'preload_N': must be [min, max], got [0, 1, 2]",
+    ),
+    (
+        "scenario-one-segment-preload-range",
+        _two_scenario(segments=[{"preload_N": [0, 1]}]),
+        "scenario segments[0] key 'preload_N': must be a finite number, got [0, 1]",
+    ),
+    (
+        "scenario-segment-outer-diameter",
+        _two_scenario(segments=[{}, {"constraints": {"outer_diameter_mm": 1.0}}]),
+        "scenario segments[1] key 'constraints': no pitch radius fits",
+    ),
+    (
+        "scenario-segment-radius-over-half-length",
+        _two_scenario(segments=[{}, {"length_mm": 4.0}]),
+        "scenario segments[1] key 'pitch_radius_mm': max 3 mm is more than half the length_mm 4 mm",
+    ),
+    (
+        "scenario-top-value-for-every-segment",
+        _two_scenario(length_mm=-1.0),
+        "scenario key 'length_mm': must be > 0.0, got -1.0",
+    ),
+    (
+        "scenario-grid-of-several",
+        _two_scenario(theta_L_deg=[5, 85, 5]),
+        "scenario key 'theta_L_deg': is one segment's grid; several segments' workspace is configuration samples",
+    ),
+    (
+        "scenario-samples-of-one",
+        lambda: tz.parse_scenario({"samples": 64}),
+        "scenario key 'samples': is for several segments; one segment's workspace is the theta_L_deg x delta_deg grid",
+    ),
+    ("scenario-samples-zero", _two_scenario(samples=0), "scenario key 'samples': must be an integer from 1 to 100000"),
+    ("scenario-bend-over", _two_scenario(max_bend_deg=200), "scenario key 'max_bend_deg': must be <= 180.0, got 200"),
+    (
+        "scenario-free-angles-of-several",
+        _two_scenario(free_wire_angles=True),
+        "scenario key 'free_wire_angles': several segments' wires are evenly spaced and interleaved",
+    ),
+    (
+        "evaluate-robot-of-another-length",
+        lambda: tz.evaluate_design(_two_scenario()(), tz.Robot(tz.Design(3, 20.0, 2.0))),
+        "the robot has 1 segment(s), the scenario 2",
+    ),
+    (
+        "space-segment-empty-range",
+        lambda: tz.parse_space({"segments": [{}, {"length_mm": [20, 20]}]}),
+        "space segments[1] key 'length_mm': [20.0, 20.0] is an empty range",
+    ),
+    (
+        "space-segment-unknown-key",
+        lambda: tz.parse_space({"segments": [{}, {"pitch": 2}]}),
+        "unknown space segments[1] key(s) ['pitch']",
+    ),
+    (
+        "space-segment-radius-over-half-length",
+        lambda: tz.parse_space({"segments": [{"length_mm": 4.0}, {}]}),
+        "space segments[0] key 'pitch_radius_mm': max 3 mm is more than half the min length_mm 4 mm",
+    ),
+    (
+        "space-offsets-of-several",
+        lambda: tz.parse_space({"segments": [{}, {}], "wire_angle_offset_deg": 5.0}),
+        "space key 'wire_angle_offset_deg': several segments' wires are evenly spaced and interleaved",
+    ),
+    (
+        "space-load-of-too-many-wires",
+        lambda: tz.parse_space({"segments": [{"n_wires": [4, 8]}, {"n_wires": 5}], "load_N": [1.0, 0.0, 0.0]}),
+        (
+            "space key 'load_N': a robot's statics enumerate 2^N sets of taut wires: at most 12 wires in all, the "
+            "segments' counts give up to 13; set it to null or use fewer wires"
+        ),
+    ),
+    (
+        "scenario-deflection-of-too-many-wires",
+        lambda: tz.parse_scenario({"segments": [{"n_wires": [7]}, {"n_wires": [6]}]}),
+        "scenario key 'weights.deflection': a robot's statics enumerate 2^N sets of taut wires: at most 12 wires",
+    ),
+    (
+        "space-grid-of-several",
+        lambda: tz.parse_space({"segments": [{}, {}], "delta_deg": [0, 360, 5]}),
+        "space key 'delta_deg': is one segment's grid",
+    ),
+    (
+        "space-too-many-structures",
+        lambda: tz.parse_space({"segments": [{"n_wires": list(range(3, 12))}] * 3}),
+        "space key 'n_wires': 729 combinations of the segments' wire counts, each its own program: at most 64",
+    ),
     ("grid-step-zero", lambda: tz.grid_deg(85.0, 0.0), "a grid step must be a positive number"),
     ("grid-reversed", lambda: tz.grid_deg(-5.0, 1.0), "start <= stop"),
     ("sweep-chunk", _sweep(chunk_size=0), "chunk_size must be a positive integer"),

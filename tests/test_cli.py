@@ -1,5 +1,6 @@
 """The command line: outputs, and one-line errors that lose nothing."""
 
+import json
 import subprocess
 import sys
 
@@ -253,3 +254,40 @@ def test_maps_of_a_robot_draw_each_segment_with_the_others_straight_and_bent(tmp
     text = capsys.readouterr().out
     assert text.count("delta (deg)") == 4 and "segment 2 of 2, the others bent 30 deg" in text
     assert out.stat().st_size > 50_000
+
+
+def test_optimize_starts_from_a_design_file_and_refuses_a_mismatch_in_one_line(tmp_path, capsys):
+    """``optimize --design``: the robot's values where the scenario leaves them out, the robot itself as
+    ``start`` in result.json and on the first line; a scenario of another segment count: one line."""
+    design = tz.example_path("design/two_segments.design.json")
+    scenario = tmp_path / "s.json"
+    task = {"max_bend_deg": 40.0, "samples": 16, "weights": {"deflection": 0.0}, "optimizer": {"starts": 1, "steps": 2}}
+    scenario.write_text(json.dumps({**task, "pitch_radius_mm": [1.0, 3.0]}))
+    argv = ["optimize", "--scenario", str(scenario), "--design", str(design), "--quiet"]
+    assert main([*argv, "--out", str(tmp_path / "o")]) == 0
+    assert capsys.readouterr().out.startswith(f"start ({design}): objective ")
+    res = json.loads((tmp_path / "o" / "result.json").read_text())
+    assert res["start"]["design"] == tz.Robot.from_json(design).to_dict()
+    scenario.write_text(json.dumps({**task, "segments": [{}]}))
+    assert main([*argv, "--out", str(tmp_path / "o2")]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "tension-zones: error: scenario key 'segments': has 1 entry; the design file has 2 segment(s): one "
+        "entry each, or leave it out\n"
+    )
+    assert not (tmp_path / "o2").exists()
+
+
+def test_optimize_takes_the_shipped_scenario_of_two_segments(tmp_path, capsys):
+    out = tmp_path / "opt"
+    scenario = tz.example_path("design/two_segments.scenario.json")
+    assert main(["optimize", "--scenario", str(scenario), "--out", str(out), "--quiet"]) == 0
+    assert capsys.readouterr().out.startswith("best: 4+4 wires, r = 4, ")
+    res = json.loads((out / "result.json").read_text())
+    assert res["segments"] == 2 and [r["n_wires"] for r in res["per_wire_count"]] == [[4, 3], [4, 4]]
+    assert not res["per_wire_count"][0]["feasible"]  # three even wires leave sectors of one taut wire
+    assert res["best"]["worst_deflection_mm"] > 0 and res["best"]["statics_infeasible_poses"] == 0
+    robot = tz.Robot.from_dict(res["best"]["design"])
+    assert robot.n_wires_per_segment == (4, 4) and float(robot.segments[0].pitch_radius) == 4.0
+    for name in ("tradeoff.png", "convergence.png"):
+        assert (out / name).stat().st_size > 10_000, name

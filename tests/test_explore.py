@@ -22,10 +22,12 @@ from hypothesis import strategies as st
 
 import tension_zones as tz
 from tension_zones.analysis import _sweep
-from tension_zones.analysis._sweep import compiled_chunk_count, grid_deg, sweep_designs, sweep_grid
+from tension_zones.analysis._sweep import compiled_chunk_count, grid_deg, sweep_configs, sweep_designs, sweep_grid
 from tension_zones.cli import main
 from tension_zones.design import _explore
 from tension_zones.design._explore import _kinematic_pose, _stats, explore_designs
+from tension_zones.design._optimise import chain_spread
+from tension_zones.model._statics import as_wrench
 
 rad = np.radians
 TH, DE = rad(grid_deg(85, 17)), rad(grid_deg(360, 30))  # 6 x 13 poses: quick
@@ -134,6 +136,74 @@ def test_engine_errors_are_clear(d3):
         sweep_designs(_kinematic_pose, one, TH, DE, 0.4, stats=[("a", "dp_max_full", "median")])
     with pytest.raises(ValueError, match="designs_per_chunk must be a positive integer"):
         sweep_designs(_kinematic_pose, one, TH, DE, 0.4, stats=[("a", "dp_max_full", "max")], designs_per_chunk=0)
+
+
+# ------------------------------------------------------------------------------------------------
+# Several segments: robots over configuration samples
+# ------------------------------------------------------------------------------------------------
+ROBOTS = {
+    "segments": [
+        {"length_mm": 40.0, "n_wires": 4, "pitch_radius_mm": [2.0, 4.0]},
+        {"length_mm": 30.0, "n_wires": [3, 4], "pitch_radius_mm": [1.0, 3.0], "preload_N": {"values": [0.0, 1.0]}},
+    ],
+    "max_bend_deg": 60.0,
+    "samples": 50,
+    "sample": {"method": "halton", "designs": 5},
+    "chunks": {"designs": 4},
+}
+
+
+def _config_with_statics(robot, B, dq, wrench):
+    return {**tz.config_metrics(robot, B, dq), **tz.config_compliance(robot, B, wrench)}
+
+
+@pytest.mark.parametrize("load", [None, [0.5, 0.2, -0.3]], ids=["kinematic", "loaded"])
+def test_a_robot_s_statistics_equal_its_own_sweep(load):
+    """Per-robot statistics equal the single robot's configuration sweep reduced with NumPy (to 1e-12),
+    for the robots of a space (two chunks of 4, the last padded), with a load its compliance too
+    (``config_compliance``); each robot is the layout the row says."""
+    space = tz.parse_space({**ROBOTS, "load_N": load})
+    batch, cols = space.batch((4, 3)), space.columns((4, 3))
+    got = explore_designs(batch, space.configs, None, 0.4, load, designs_per_chunk=4, quiet=True)
+    for i in range(space.count((4, 3))):
+        robot = jax.tree_util.tree_map(lambda x: x[i], batch)  # noqa: B023  (used at once)
+        assert float(robot.segments[1].pitch_radius) == cols["pitch_radius_mm_2"][i]
+        np.testing.assert_allclose(np.asarray(robot.route_radii)[4:, 0], cols["pitch_radius_mm_1"][i])
+        np.testing.assert_allclose(np.degrees(np.asarray(robot.segments[1].wire_angles)), [15.0, 135.0, 255.0])
+        if load is None:
+            res = sweep_configs(tz.config_metrics, robot, space.configs, 0.4, quiet=True)
+        else:
+            res = sweep_configs(_config_with_statics, robot, space.configs, 0.4, as_wrench(load), quiet=True)
+        spread = jax.vmap(lambda B: chain_spread(robot, B))(space.configs)  # noqa: B023
+        res["controllable"] = np.asarray(spread) > _explore.SPAN_TOL
+        for name, key, op in _stats(load is not None):
+            np.testing.assert_allclose(got[name][i], NUMPY[op](res[key].astype(float)), rtol=1e-12, err_msg=name)
+    assert 0 < got["controllable_fraction"].min() < 1  # three wires in a segment: one-wire sectors
+
+
+def test_no_recompile_when_only_a_robot_s_values_change():
+    """New numbers, number of robots and of configurations, bending and dq: the same program."""
+    space = tz.parse_space(ROBOTS)
+    explore_designs(space.batch((4, 4)), space.configs, None, 0.4, designs_per_chunk=4, quiet=True)
+    n0 = compiled_chunk_count()
+    segments = [
+        {"length_mm": 30.0, "n_wires": 4, "pitch_radius_mm": 2.5, "preload_N": 1.0},
+        {"length_mm": 20.0, "n_wires": 4, "pitch_radius_mm": [1.0, 2.0], "backbone_EI_Nmm2": [100.0, 2000.0]},
+    ]
+    other = tz.parse_space({**ROBOTS, "segments": segments, "samples": 90, "max_bend_deg": 80.0})
+    explore_designs(other.batch((4, 4)), other.configs, None, 0.7, designs_per_chunk=4, quiet=True)
+    assert compiled_chunk_count() == n0
+
+
+def test_a_one_segment_space_in_the_segments_form_is_the_one_segment_space():
+    from tension_zones.design._space import DEFAULTS, ROBOT_KEYS, SEGMENT_KEYS
+
+    flat = {**SMALL, "n_wires": [3, 4], "length_mm": [10.0, 20.0], "pitch_radius_mm": 2.0, "preload_N": 0.5}
+    form = {k: v for k, v in flat.items() if k not in SEGMENT_KEYS}
+    form["segments"] = [{k: flat[k] for k in SEGMENT_KEYS if k in flat}]
+    a, b = tz.parse_space(flat), tz.parse_space(form)
+    assert_tables_identical(tz.explore(a, quiet=True), tz.explore(b, quiet=True))
+    assert set(a.raw) == set(DEFAULTS) - set(ROBOT_KEYS)  # a one-segment exploration's identity as it was
 
 
 # ------------------------------------------------------------------------------------------------
@@ -352,6 +422,26 @@ def test_cli_explore_writes_table_front_and_plots_and_resumes(tmp_path, capsys):
     text = capsys.readouterr()
     assert "resuming the exploration" in text.out and "5 of 5 chunks done" in text.out
     assert text.err == ""
+
+
+def test_cli_explores_the_shipped_two_segment_space_and_resumes(tmp_path, capsys):
+    space, out = str(tz.example_path("design/two_segments.space.json")), tmp_path / "out"
+    assert main(["explore", "--space", space, "--out", str(out)]) == 0
+    text = capsys.readouterr()
+    assert "exploring 32 designs x 128 configurations" in text.out and "4+4 wires" in text.err
+    assert "explored 32 designs (4+3, 4+4 wires)" in text.out and "Pareto front of pitch_radius_mm_max" in text.out
+    table = dict(np.load(out / "table.npz"))
+    assert table["n_wires_2"].tolist() == [3] * 16 + [4] * 16 and set(table["n_wires"].tolist()) == {7, 8}
+    np.testing.assert_array_equal(table["pitch_radius_mm_1"][:16], table["pitch_radius_mm_1"][16:])  # paired
+    assert np.all(table["controllable_fraction"][16:] == 1) and np.all(table["controllable_fraction"][:16] < 1)
+    front = (out / "front.csv").read_text().splitlines()
+    assert len(front) > 1 and all(row.split(",")[list(table).index("n_wires")] == "8" for row in front[1:])
+    for name in ("table.csv", "front.png", "parallel.png", "manifest.json"):
+        assert (out / name).stat().st_size > 0, name
+    chunks = sorted(p.name for p in (out / "chunks").iterdir())
+    assert chunks == ["n4+3_000000.npy", "n4+3_000001.npy", "n4+4_000000.npy", "n4+4_000001.npy"]
+    assert main(["explore", "--space", space, "--out", str(out), "--quiet"]) == 0
+    assert "resuming the exploration" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize(

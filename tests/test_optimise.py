@@ -1,5 +1,7 @@
 """Design optimiser: scenario validation, exact constraint handling, controllability, optima."""
 
+import dataclasses
+import json
 import math
 
 import jax
@@ -11,6 +13,7 @@ from hypothesis import strategies as st
 
 import tension_zones as tz
 from tension_zones.design import _optimise as opt
+from tension_zones.design._layout import hole_gaps, interleaved_angles, with_numbers
 from tension_zones.design._scenario import DEFAULTS, load_scenario, parse_scenario
 
 
@@ -424,3 +427,146 @@ def test_scenario_strict_controllability_must_be_a_boolean():
     with pytest.raises(ValueError, match="'strict_controllability': must be true or false"):
         parse_scenario({"strict_controllability": "yes"})
     assert parse_scenario({}).strict_controllability is False
+
+
+# -- several segments ------------------------------------------------------------------------------
+TWO = json.loads(tz.example_path("design/two_segments.scenario.json").read_text())
+
+
+def test_a_one_segment_scenario_in_the_segments_form_is_the_one_segment_scenario():
+    """Every per-segment key moved into a ``segments`` entry of one: the same scenario, the same result."""
+    flat = {**SMALL, "length_mm": 25.0, "preload_N": 1.0, "constraints": {"outer_diameter_mm": 4.5}}
+    seg_keys = ("n_wires", "length_mm", "pitch_radius_mm", "wire_stiffness_N_per_mm", "preload_N", "constraints")
+    form = {k: v for k, v in flat.items() if k not in seg_keys}
+    form["segments"] = [{k: flat[k] for k in seg_keys}]
+    a, b = parse_scenario(flat), parse_scenario(form)
+    for f in dataclasses.fields(a):
+        if f.name != "raw":
+            np.testing.assert_equal(getattr(a, f.name), getattr(b, f.name), err_msg=f.name)
+    fast = {"optimizer": {"starts": 2, "steps": 3}}
+    ra, rb = (opt.optimize(parse_scenario({**d, **fast}), progress=False) for d in (flat, form))
+    assert {**ra, "seconds": 0} == {**rb, "seconds": 0}
+
+
+def test_interleaved_wires_keep_every_disk_s_holes_apart():
+    for counts in [(3, 3), (4, 3), (3, 4, 5), (4, 4, 4), (6, 4)]:
+        angles = interleaved_angles(counts)
+        gaps = hole_gaps(angles)
+        assert min(gaps) > 1e-6 and gaps == sorted(gaps), counts  # distal disks hold fewer holes
+        lcm = math.lcm(*counts)
+        assert gaps[0] >= 2 * math.pi / (len(counts) * lcm) - 1e-12  # the lattice argument's bound
+    # equal counts: the first disk's holes evenly spaced; the shipped two-segment design's layout
+    assert hole_gaps(interleaved_angles((3, 3)))[0] == pytest.approx(math.pi / 3)
+    np.testing.assert_allclose(np.degrees(interleaved_angles((3, 3))[1]), [60.0, 180.0, 300.0])
+    # a disk's pitch radius keeps its holes apart: four wires and three distal ones 15 deg apart
+    r_lo = opt._chain_bounds(parse_scenario(TWO), (4, 3)).r_lo
+    assert float(r_lo[0]) == pytest.approx(max(1.5, 0.5 / (2 * math.sin(math.radians(7.5)))))
+
+
+def test_chain_spread_of_one_segment_is_the_segment_s_spread():
+    d = tz.Design(4, 20.0, 2.0, wire_angles=np.radians([10.0, 100.0, 170.0, 260.0]))
+    robot = tz.Robot(d)
+    for delta in np.radians(np.arange(3.0, 360.0, 11.0)):
+        B = np.array([[0.6 * np.cos(delta), -0.6 * np.sin(delta)]])
+        assert float(opt.chain_spread(robot, B)) == pytest.approx(float(opt.spread(d, delta)), abs=1e-12)
+
+
+def _two(**change):
+    segments = [{**TWO["segments"][0]}, {**TWO["segments"][1], "n_wires": [4]}]
+    return parse_scenario({**TWO, "segments": segments, **change})
+
+
+@pytest.mark.slow
+def test_a_robot_s_optimum_beats_its_start_and_is_what_a_fresh_evaluation_gives():
+    """With the deflection term on (a tip load): the best robot's objective and pieces are what a fresh
+    evaluation of its design file gives, and no worse than the mid-range start's."""
+    sc = _two(load_N=[0.5, 0.0, 0.0], weights={"position_uncertainty": 1.0, "deflection": 1.0, "wire_count": 0.05})
+    res = opt.optimize(sc, progress=False)
+    best = res["best"]
+    assert res["segments"] == 2 and best["feasible"] and best["n_wires"] == [4, 4]
+    robot = tz.Robot.from_dict(best["design"])  # the best robot as a design file
+    again = opt.evaluate_design(sc, robot)
+    assert again["objective"] == pytest.approx(best["objective"], rel=1e-9)
+    assert again["worst_position_uncertainty_mm"] == pytest.approx(best["worst_position_uncertainty_mm"], rel=1e-9)
+    assert again["worst_deflection_mm"] == pytest.approx(best["worst_deflection_mm"], rel=1e-9)
+    assert best["worst_deflection_mm"] > 0 and best["statics_infeasible_poses"] == 0
+    # start 0 is every box variable mid-range: the optimum is no worse
+    b = opt._chain_bounds(sc, (4, 4))
+    ends = {"pitch_radius": (b.r_lo, b.r_hi), "wire_stiffness": (b.k_lo, b.k_hi), "preload": (b.p_lo, b.p_hi)}
+    mid = {f: 0.5 * (np.asarray(lo) + np.asarray(hi)) for f, (lo, hi) in ends.items()}
+    start = opt.evaluate_design(sc, with_numbers(opt._base_robot(sc, (4, 4)), **mid))
+    assert start["feasible"] and best["objective"] <= start["objective"]
+    assert res["history"]["4+4"][-1] == pytest.approx(best["objective"]) and len(res["history"]["4+4"]) == sc.steps
+    # each disk's hole circle within its outer diameter and its range; every wire routed on it
+    assert best["pitch_radius_mm"][1] <= 3.0 - 0.2 - 0.15 + 1e-12 and best["pitch_radius_mm"][0] <= 4.0
+    np.testing.assert_allclose(np.asarray(robot.route_radii)[4:, 0], best["pitch_radius_mm"][0])
+
+
+@pytest.mark.slow
+def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
+    opt.optimize(_two(), progress=False)
+    before = opt._run_starts._cache_size()
+    segments = [
+        {**TWO["segments"][0], "length_mm": 50.0, "pitch_radius_mm": [1.0, 3.5], "preload_N": [0.5, 1.0]},
+        {**TWO["segments"][1], "n_wires": [4], "length_mm": 20.0, "backbone_EI_Nmm2": 900.0},
+    ]
+    other = {
+        **TWO,
+        "segments": segments,
+        "max_bend_deg": 80.0,
+        "joint_uncertainty_mm": 0.7,
+        "min_spread": 0.4,
+        "load_N": [0.0, 1.0, -0.5],
+        "weights": {"position_uncertainty": 2.0, "deflection": 0.5, "wire_count": 0.3},
+        "optimizer": {**TWO["optimizer"], "learning_rate": 0.2, "seed": 5},
+    }
+    opt.optimize(parse_scenario(other), progress=False)
+    assert opt._run_starts._cache_size() == before
+
+
+def test_a_robot_s_deflection_term_is_its_worst_reduced_deflection_under_the_tip_load():
+    """The objective's pieces against the robot's compliance (``config_compliance``, itself checked against
+    an independent reference in test_chain) at each of the task's configurations, under a load off every
+    axis; a three-wire distal segment cannot steer every configuration of the disk, so infeasible."""
+    weights = {"position_uncertainty": 1.0, "deflection": 2.0, "wire_count": 0.05}
+    sc = parse_scenario({**TWO, "load_N": [0.5, 0.2, -0.3], "weights": weights})
+    robot = with_numbers(opt._base_robot(sc, (4, 3)), pitch_radius=[3.0, 2.0], preload=[0.0, 0.5])
+    row = opt.evaluate_design(sc, robot)
+    c = jax.vmap(lambda B: tz.config_compliance(robot, B, sc.load))(sc.configs)
+    ok = np.asarray(c["feasible"]) & np.isfinite(np.asarray(c["deflection_mm_reduced"]))
+    worst = np.max(np.where(ok, c["deflection_mm_reduced"], 0.0))
+    assert row["worst_deflection_mm"] == pytest.approx(worst, rel=1e-12) and worst > 0
+    assert row["statics_infeasible_poses"] == int(np.sum(~ok))
+    assert row["objective"] == pytest.approx(row["worst_position_uncertainty_mm"] + 2.0 * worst + 0.05 * 7, rel=1e-12)
+    assert row["spread_violations"] > 0 and not row["feasible"]
+
+
+def test_a_scenario_for_a_robot_takes_what_it_leaves_out_from_the_robot():
+    """``for_robot``: a segment's own key first, then the file's top level, then the robot's value (a
+    one-value range: fixed); the joint uncertainty is the largest play unless the scenario sets it."""
+    robot = tz.Robot.from_json(tz.example_path("design/two_segments.design.json"))
+    d = {"segments": [{}, {"pitch_radius_mm": [1.0, 2.0]}], "n_wires": [3, 4], "max_bend_deg": 40.0, "samples": 8}
+    sc = parse_scenario(d, robot, play=[0.1, 0.3, 0.0, 0.2, 0.1, 0.1])
+    a, b = robot.segments
+    assert [s.n_wires for s in sc.segments] == [(3, 4), (3, 4)]  # the file's top level
+    assert sc.segments[0].pitch_radius == (float(a.pitch_radius),) * 2  # the robot's, fixed
+    assert sc.segments[1].pitch_radius == (1.0, 2.0)  # the segment's own
+    assert [s.length for s in sc.segments] == [float(a.length), float(b.length)]
+    assert [s.backbone_EI for s in sc.segments] == [float(a.backbone_EI), float(b.backbone_EI)]
+    assert sc.dq == pytest.approx(0.3)
+    assert parse_scenario({**d, "joint_uncertainty_mm": 0.5}, robot, play=[0.3]).dq == 0.5
+    with pytest.raises(ValueError, match="'segments': has 3 entries; the design file has 2 segment"):
+        parse_scenario({**d, "segments": [{}, {}, {}]}, robot)
+
+
+def test_optimize_from_a_robot_reports_the_robot_itself_as_the_start():
+    """``optimize(..., start=robot)``: ``start`` is the robot as it is (its own routing) under the
+    scenario, what ``evaluate_design`` gives; fixed values stay the robot's in every result."""
+    robot = tz.Robot.from_json(tz.example_path("design/two_segments.design.json"))
+    d = {"max_bend_deg": 40.0, "samples": 16, "weights": {"deflection": 0.0}, "optimizer": {"starts": 1, "steps": 2}}
+    sc = parse_scenario(d, robot)
+    res = opt.optimize(sc, progress=False, start=robot)
+    assert res["start"] == opt.evaluate_design(sc, robot)
+    assert res["start"]["design"] == robot.to_dict()
+    assert [r["n_wires"] for r in res["per_wire_count"]] == [list(robot.n_wires_per_segment)]
+    assert res["per_wire_count"][0]["pitch_radius_mm"] == [float(s.pitch_radius) for s in robot.segments]

@@ -368,19 +368,28 @@ def _reduce_final(op, acc):
     return jnp.where(some, value, jnp.nan)
 
 
-def _design_stats(fn, stats, chunk, design, th_grid, de_grid, n_de, n_poses, args):
-    """Statistics of ``fn`` over every pose of the grid for **one** design, (S,).
+def _poses_at(source, i):
+    """The poses at flat indices ``i`` of a workspace on the device: a grid ``(theta_L, delta,
+    n_delta)`` (row-major, ``delta`` fastest) or configuration samples ``(B,)`` (M, S, 2)."""
+    if len(source) == 1:
+        return (source[0][i],)
+    return _grid_poses(i, *source)
+
+
+def _design_stats(fn, stats, chunk, design, source, n_poses, args):
+    """Statistics of ``fn`` over every pose of the workspace ``source`` (:func:`_poses_at`) for **one**
+    design or robot, (S,).
 
     The poses are generated on the device ``chunk`` at a time (as :func:`_eval_grid_chunk` does) and
-    reduced as they come, so the working set is one step's poses whatever the grid; the number of
-    steps is a traced value, so a grid of another size is the same program. ``stats`` (static):
-    ``(name, output, reduction)`` triples.
+    reduced as they come, so the working set is one step's poses whatever the workspace; the number
+    of steps is a traced value, so a workspace of another size is the same program. ``stats``
+    (static): ``(name, output, reduction)`` triples.
     """
-    dt = design.length.dtype
+    dt = _subject_dtype(design)
 
     def step(c, acc):
         i, real = _grid_index(c * chunk, chunk, n_poses)
-        out = _eval_chunk(fn, design, _grid_poses(i, th_grid, de_grid, n_de), args)
+        out = _eval_chunk(fn, design, _poses_at(source, i), args)
         return tuple(_reduce_step(op, a, out[key], real) for (_, key, op), a in zip(stats, acc))
 
     init = tuple((jnp.asarray(_IDENTITY[op], dt), jnp.zeros((), dt)) for _, _, op in stats)
@@ -388,8 +397,8 @@ def _design_stats(fn, stats, chunk, design, th_grid, de_grid, n_de, n_poses, arg
     return jnp.stack([_reduce_final(op, a) for (_, _, op), a in zip(stats, acc)])
 
 
-def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, args):
-    """:func:`_design_stats` for each design of a batch (leading axis), (D, S).
+def _designs_chunk(fn, stats, layout, designs, source, n_poses, args):
+    """:func:`_design_stats` for each design (or robot) of a batch (leading axis), (D, S).
 
     ``layout = (chunk, mesh)`` (static): poses per step, and the local devices, over which the
     designs are split (``shard_map``: one program for all of them, each device mapping over its
@@ -400,30 +409,38 @@ def _designs_chunk(fn, stats, layout, designs, th_grid, de_grid, n_de, n_poses, 
     """
     chunk, mesh = layout
 
-    def local(designs, th_grid, de_grid, n_de, n_poses, args):
-        return jax.lax.map(lambda d: _design_stats(fn, stats, chunk, d, th_grid, de_grid, n_de, n_poses, args), designs)
+    def local(designs, source, n_poses, args):
+        return jax.lax.map(lambda d: _design_stats(fn, stats, chunk, d, source, n_poses, args), designs)
 
     split, whole = PartitionSpec("designs"), PartitionSpec()
     # each device's designs are independent (no collectives), so the varying-axis check is off: the
     # loops' carries start replicated and become per-device
-    return jax.shard_map(
-        local, mesh=mesh, in_specs=(split, whole, whole, whole, whole, whole), out_specs=split, check_vma=False
-    )(designs, th_grid, de_grid, n_de, n_poses, args)
+    return jax.shard_map(local, mesh=mesh, in_specs=(split, whole, whole, whole), out_specs=split, check_vma=False)(
+        designs, source, n_poses, args
+    )
 
 
 _designs_chunk_jit = jax.jit(_designs_chunk, static_argnums=(0, 1, 2))
 
 
+def _structure(subject):
+    """A design's wire count, or a robot's wire counts per segment (tuple): what a program depends on."""
+    return subject.n_wires if isinstance(subject, Design) else subject.n_wires_per_segment
+
+
 @functools.lru_cache(maxsize=64)
-def _output_shapes(fn, n_wires, dtype, arg_specs):
-    """``{output: shape}`` of ``fn`` at one pose (traced once per function, wire count and argument
-    shapes: tracing the kinematic measures costs more than exploring a few designs)."""
-    spec = jax.tree_util.tree_map(
-        lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), Design(n_wires, 2.0, 1.0, dtype=dtype)
-    )
-    scalar = jax.ShapeDtypeStruct((), dtype)
+def _output_shapes(fn, structure, dtype, arg_specs):
+    """``{output: shape}`` of ``fn`` at one pose (traced once per function, structure (:func:`_structure`)
+    and argument shapes: tracing the kinematic measures costs more than exploring a few designs)."""
+    if isinstance(structure, tuple):  # a robot and one configuration B (S, 2)
+        subject = Robot([Design(n, 2.0, 1.0, dtype=dtype) for n in structure])
+        pose = (jax.ShapeDtypeStruct((len(structure), 2), dtype),)
+    else:  # a design and one pose (theta_L, delta)
+        subject = Design(structure, 2.0, 1.0, dtype=dtype)
+        pose = (jax.ShapeDtypeStruct((), dtype),) * 2
+    spec = jax.tree_util.tree_map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), subject)
     args = tuple(jax.ShapeDtypeStruct(shape, dt) for shape, dt in arg_specs)
-    out = jax.eval_shape(lambda d, t, x, a: fn(d, t, x, *a), spec, scalar, scalar, args)
+    out = jax.eval_shape(lambda d, p, a: fn(d, *p, *a), spec, pose, args)
     return {k: v.shape for k, v in out.items()}
 
 
@@ -436,7 +453,7 @@ def _check_stats(fn, design, args, stats):
     if len(set(names)) != len(names):
         raise ValueError(f"stats names must be unique, got {names}")
     arg_specs = tuple((np.shape(a), str(np.asarray(a).dtype)) for a in args)
-    shapes = _output_shapes(fn, design.n_wires, str(design.dtype), arg_specs)
+    shapes = _output_shapes(fn, _structure(design), str(_subject_dtype(design)), arg_specs)
     for name, key, op in stats:
         if op not in REDUCTIONS:
             raise ValueError(f"stat {name!r}: unknown reduction {op!r}; known: {list(REDUCTIONS)}")
@@ -482,6 +499,24 @@ def _batch_and_grid(designs, theta_L, delta) -> tuple[Design, np.ndarray, np.nda
     return jax.tree_util.tree_map(np.asarray, designs), th, de
 
 
+def _batch_and_workspace(designs, theta_L, delta) -> tuple:
+    """A batch, its workspace as :func:`_workspace`'s ``source`` and its number of poses, checked: a
+    batch of designs and a grid's axes, or of robots (NumPy leaves with a leading axis) and
+    configurations ``theta_L = B`` (M, S, 2) with ``delta = None``."""
+    if not isinstance(designs, Robot):
+        designs, th, de = _batch_and_grid(designs, theta_L, delta)
+        return designs, (th, de), th.size * de.size
+    if np.ndim(designs.route_angles) != 3:
+        raise TypeError("robots must be a tension_zones.Robot whose leaves have a leading axis (a batch of robots)")
+    B = np.asarray(theta_L, dtype=float)
+    if delta is not None or B.ndim != 3 or B.shape[0] == 0 or B.shape[1:] != (designs.n_segments, 2):
+        raise ValueError(
+            f"a batch of robots takes its configurations B (M >= 1, {designs.n_segments}, 2) as theta_L and "
+            f"None as delta, got {B.shape} and {type(delta).__name__}"
+        )
+    return jax.tree_util.tree_map(np.asarray, designs), (B,), B.shape[0]
+
+
 def _resumed(done, n_designs: int, D: int, S: int) -> tuple[np.ndarray, np.ndarray]:
     """The results table (n_designs, S), NaN but for the rows of ``done`` (chunk index -> its rows),
     and which of the chunks of ``D`` designs are done."""
@@ -494,16 +529,27 @@ def _resumed(done, n_designs: int, D: int, S: int) -> tuple[np.ndarray, np.ndarr
     return results, is_done
 
 
-def _placement(dt, th, de, D: int, P: int, args) -> tuple:
+def _workspace(source, P: int, dt, idx_t) -> tuple:
+    """A workspace's arrays for the device (:func:`_poses_at`), padded to whole steps of ``P`` poses:
+    a grid's axes ``source = (theta_L, delta)`` and its number of directions, or the samples
+    ``source = (B,)`` (zeros past the last)."""
+    if len(source) == 1:
+        (B,) = source
+        return (np.concatenate([B.astype(dt), np.zeros((P * -(-len(B) // P) - len(B),) + B.shape[1:], dt)]),)
+    th, de = source
+    return (*_pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt), idx_t(de.size))
+
+
+def _placement(dt, source, n_poses: int, D: int, P: int, args) -> tuple:
     """Where the chunks run: the mesh of the process's local devices, a chunk's ``D`` designs padded to
-    split evenly over them, the sharding that splits them, and what every chunk shares (the grid's
-    axes ``th``, ``de`` padded to whole chunks of ``P`` poses, their sizes, ``args``), on every device."""
-    idx_t = np.int64 if th.size * de.size + P >= 2**31 else np.int32
-    axes = _pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt)
+    split evenly over them, the sharding that splits them, and what every chunk shares (the workspace
+    ``source`` padded to whole steps of ``P`` poses, :func:`_workspace`, its ``n_poses``, ``args``), on
+    every device."""
+    idx_t = np.int64 if n_poses + P >= 2**31 else np.int32
     mesh = Mesh(np.array(jax.local_devices()), ("designs",))
     padded = mesh.size * -(-D // mesh.size)
     split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
-    shared = jax.device_put((*axes, idx_t(de.size), idx_t(th.size * de.size), tuple(args)), whole)
+    shared = jax.device_put((_workspace(source, P, dt, idx_t), idx_t(n_poses), tuple(args)), whole)
     return mesh, padded, split, shared
 
 
@@ -521,7 +567,7 @@ def _in_flight(n_rounds: int, launch: Callable, collect: Callable) -> None:
 
 def sweep_designs(
     fn: Callable,
-    designs: Design,
+    designs: Design | Robot,
     theta_L,
     delta,
     *args,
@@ -533,18 +579,23 @@ def sweep_designs(
     done: dict[int, np.ndarray] | None = None,
     on_chunk: Callable[[int, np.ndarray], None] | None = None,
 ) -> dict[str, np.ndarray] | None:
-    """Per-design statistics of ``fn`` over the grid ``theta_L x delta`` for a batch of designs.
+    """Per-design statistics of ``fn`` over the grid ``theta_L x delta`` for a batch of designs, or
+    over configurations for a batch of robots.
 
     For each design ``d`` of ``designs`` (a :class:`Design` whose leaves have a leading axis of N
     designs, one wire count) and each ``(name, output, reduction)`` of ``stats``:
     ``reduction`` (see :data:`REDUCTIONS`) of ``fn(d, theta_L, delta, *args)[output]`` over the
-    grid's poses. Equal to reducing :func:`sweep_grid`'s arrays with NumPy, design by design.
+    grid's poses. Equal to reducing :func:`sweep_grid`'s arrays with NumPy, design by design. For a
+    batch of robots (a :class:`Robot` with a leading axis, one structure) ``theta_L`` is the
+    configurations ``B`` (M, S, 2) rad and ``delta`` is ``None``: ``fn(robot, B_i, *args)``, equal to
+    reducing :func:`sweep_configs`' arrays robot by robot.
 
     * **bounded memory**: designs go ``designs_per_chunk`` to a compiled call (the last chunk padded
       with its last design), and each design's poses ``poses_per_chunk`` at a time, reduced as they
       come: the working set depends on neither N nor the grid; the host keeps N x S results.
-    * **no recompiles when only values change**: the designs' numbers, the grid's values *and size*
-      and ``args`` are traced; one program per function, statistics, wire count and chunk sizes.
+    * **no recompiles when only values change**: the designs' numbers, the grid's (or the
+      configurations') values *and size* and ``args`` are traced; one program per function,
+      statistics, wire count (robot structure) and chunk sizes.
     * **cores and devices**: up to :data:`IN_FLIGHT` chunks run at once; each chunk's designs are
       split over the process's local devices by one program (a chunk is padded to a multiple of
       their number; results do not depend on it).
@@ -559,19 +610,20 @@ def sweep_designs(
       ``on_chunk(c, rows)`` is called on process 0 as each chunk's rows arrive (e.g. to save them).
 
     Args:
-        fn: pure single-pose function ``fn(design, theta_L, delta, *args) -> dict`` of scalars.
+        fn: pure single-pose function ``fn(design, theta_L, delta, *args) -> dict`` of scalars (a
+            robot's: ``fn(robot, B, *args)``).
         designs: the batch (leaves with a leading axis of N).
-        theta_L, delta: the grid's axes (rad), 1-D.
+        theta_L, delta: the grid's axes (rad), 1-D; robots: ``B`` (M, S, 2) and ``None``.
         *args: extra arguments shared by every pose and design (traced).
         stats: ``(name, output, reduction)`` triples.
 
     Returns ``{name: (N,) array}`` on process 0, ``None`` on the other processes.
     """
-    designs, th, de = _batch_and_grid(designs, theta_L, delta)
+    designs, source, n_poses = _batch_and_workspace(designs, theta_L, delta)
     D = positive_int("designs_per_chunk", designs_per_chunk)
     P = positive_int("poses_per_chunk", poses_per_chunk)
     stats = _check_stats(fn, designs, args, stats)
-    n_designs, S = designs.length.shape[0], len(stats)
+    n_designs, S = jax.tree_util.tree_leaves(designs)[0].shape[0], len(stats)
     n_chunks = -(-n_designs // D)
     first = jax.process_index() == 0
     nproc = jax.process_count()
@@ -582,7 +634,7 @@ def sweep_designs(
     mine = pending[jax.process_index() :: nproc]
     n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
 
-    mesh, padded, split, shared = _placement(designs.dtype, th, de, D, P, args)
+    mesh, padded, split, shared = _placement(_subject_dtype(designs), source, n_poses, D, P, args)
 
     def launch(k):  # this process's k-th chunk, dispatched asynchronously
         if k >= mine.size:

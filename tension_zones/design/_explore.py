@@ -22,10 +22,15 @@ import jax
 import numpy as np
 
 from .._io import LOCK_NAME, atomic_path, folder_lock
+from ..analysis._chain import config_metrics
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
 from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, sweep_designs
+from ..model._chain_statics import config_compliance
 from ..model._design import Design, read_json
+from ..model._robot import Robot
 from ..model._statics import as_wrench, compliance_pose
+from ._optimise import chain_spread
+from ._scenario import wires_label
 from ._space import Space
 
 FORMAT = "tension-zones exploration 1"
@@ -42,9 +47,26 @@ def _kinematic_pose(design: Design, theta_L, delta, dq):
     return {**m, "controllable": m["n_taut"] >= 2}
 
 
+def _kinematic_config(robot: Robot, B, dq):
+    """:func:`~tension_zones.analysis.config_metrics` at one configuration ``B`` (S, 2), and whether it
+    is controllable: the taut wires span all ``2S`` bending directions (:func:`~._optimise.chain_spread`
+    above :data:`SPAN_TOL`; for one segment, two taut wires)."""
+    return {**config_metrics(robot, B, dq), "controllable": chain_spread(robot, B) > SPAN_TOL}
+
+
+#: The smallest singular value of the taut wires' unit directions above which they span (rank 2S).
+SPAN_TOL = 1e-9
+
+
 def _loaded_pose(design: Design, theta_L, delta, dq, wrench):
     """:func:`_kinematic_pose` and the tension-only statics under ``wrench`` (tension_zones/MODEL.md Sec. 4)."""
     return {**_kinematic_pose(design, theta_L, delta, dq), **compliance_pose(design, theta_L, delta, wrench)}
+
+
+def _loaded_config(robot: Robot, B, dq, wrench):
+    """:func:`_kinematic_config` and the robot's tension-only statics under ``wrench``
+    (:func:`~tension_zones.model.config_compliance`: pull-only tensions over the whole chain)."""
+    return {**_kinematic_config(robot, B, dq), **config_compliance(robot, B, wrench)}
 
 
 def _stats(loaded: bool) -> tuple[tuple[str, str, str], ...]:
@@ -99,7 +121,7 @@ def objective(column: str) -> tuple[str, str]:
 
 
 def explore_designs(
-    designs: Design,
+    designs: Design | Robot,
     theta_L,
     delta,
     dq=DEFAULT_DQ,
@@ -112,11 +134,13 @@ def explore_designs(
     done: dict[int, np.ndarray] | None = None,
     on_chunk: Callable[[int, np.ndarray], None] | None = None,
 ) -> dict[str, np.ndarray] | None:
-    """The workspace statistics (:data:`STATS`) of a batch of designs over a grid, in memory.
+    """The workspace statistics (:data:`STATS`) of a batch of designs over a grid, or of robots over
+    configurations, in memory.
 
     Args:
-        designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,).
-        theta_L, delta: the grid's axes (rad).
+        designs: one wire count's designs, a :class:`Design` whose leaves have a leading axis (N,);
+            or robots of one structure, a :class:`Robot` likewise.
+        theta_L, delta: the grid's axes (rad); robots: the configurations ``B`` (M, S, 2) and ``None``.
         dq: joint-level uncertainty (mm), traced.
         load: ``None`` or the tip force (3,) / wrench (6,) (N, N mm, base frame), traced: adds the
             compliance statistics.
@@ -124,10 +148,14 @@ def explore_designs(
             :func:`~tension_zones.analysis.sweep_designs`.
 
     Returns ``{column: (N,)}`` on process 0 (``None`` on the others). Each column equals the NumPy
-    reduction of :func:`~tension_zones.sweep_grid`'s arrays for that design (tested to 1e-12).
+    reduction of :func:`~tension_zones.sweep_grid`'s (a robot's: ``sweep_configs``') arrays for that
+    design (tested to 1e-12).
     """
     args = (np.float64(dq),) if load is None else (np.float64(dq), np.asarray(as_wrench(load)))
-    fn = _kinematic_pose if load is None else _loaded_pose
+    if isinstance(designs, Robot):
+        fn: Callable = _kinematic_config if load is None else _loaded_config
+    else:
+        fn = _kinematic_pose if load is None else _loaded_pose
     return sweep_designs(
         fn,
         designs,
@@ -153,14 +181,27 @@ def explore_designs(
 #: with and without a load, kept above it), plus ``chunks.designs x DESIGN_BYTES`` on the host (the
 #: chunk's designs and results, with room).
 POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
+#: A robot's chunk holds about ``chunks.poses x (CONFIG_BYTES + CONFIG_BYTES_N3 x N^3)`` bytes for ``N``
+#: wires in all (the exact bound's pair terms; XLA's memory analysis, two and three segments of 3 to 8
+#: wires each, kept above it).
+CONFIG_BYTES, CONFIG_BYTES_N3 = 4000, 30
+#: With a load, ``CONFIG_BYTES_STATICS x 2^N x N^2`` bytes more per configuration (the tensions' 2^N free
+#: sets, ``model.config_compliance``; XLA's memory analysis, 3+3 to 4+4+4 wires, at most 7.6, kept above).
+CONFIG_BYTES_STATICS = 10
 
 
-def chunk_memory(space: Space, n: int) -> int:
-    """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``)."""
+def chunk_memory(space: Space, n) -> int:
+    """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``;
+    several segments: ``n`` a combination of counts, see ``CONFIG_BYTES``)."""
     devices = len(jax.local_devices())
-    return (
-        devices * space.poses_per_chunk * (POSE_BYTES + POSE_BYTES_N2 * n * n) + space.designs_per_chunk * DESIGN_BYTES
-    )
+    if space.segments:
+        N = sum(n)
+        per_pose = (
+            CONFIG_BYTES + CONFIG_BYTES_N3 * N**3 + (0 if space.load is None else CONFIG_BYTES_STATICS * 2**N * N**2)
+        )
+    else:
+        per_pose = POSE_BYTES + POSE_BYTES_N2 * n * n
+    return devices * space.poses_per_chunk * per_pose + space.designs_per_chunk * DESIGN_BYTES
 
 
 #: The most chunks an exploration takes with the resource checks on: each chunk is a file of its own
@@ -170,6 +211,10 @@ MAX_CHUNKS = 100_000
 #: benchmarks/README.md, "Design-space exploration"); a pose costs about n / 4 times as much for n wires
 #: (measured from 3 to 16). The basis of the work estimate (:func:`work_seconds`), off CPUs none.
 RATE_KINEMATIC, RATE_LOADED, RATE_WIRES = 2e6, 6e5, 4
+#: Design-configurations per second of one CPU process for a robot of ``RATE_CHAIN_WIRES`` wires in all
+#: (benchmarks/README.md, "Robots": two segments of 3 + 3 wires); a configuration costs about
+#: ``(N / RATE_CHAIN_WIRES)^3`` times as much for ``N`` wires (the exact bound's pair terms, ``O(N^3)``).
+RATE_CHAIN, RATE_CHAIN_WIRES = 5e4, 6
 #: The most computing an exploration takes with the resource checks on, in estimated seconds (a day).
 MAX_WORK_S = 86_400
 #: How an exploration's refusals say they can be overridden.
@@ -181,10 +226,22 @@ def work_seconds(space: Space) -> float | None:
     (``RATE_KINEMATIC``) shared by the run's processes; None off CPUs (no rate to go by)."""
     if jax.default_backend() != "cpu":
         return None
-    rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
-    poses = space.theta_L.size * space.delta.size
-    evals = sum(space.count(n) * poses * max(n, RATE_WIRES) / RATE_WIRES for n in space.n_wires)
-    return evals / (rate * jax.process_count())
+    if space.segments:
+        cost = lambda n: _chain_cost(sum(n), space.load is not None) / RATE_CHAIN
+    else:
+        rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
+        cost = lambda n: max(n, RATE_WIRES) / RATE_WIRES / rate
+    evals = sum(space.count(n) * space.n_poses * cost(n) for n in space.n_wires)
+    return evals / jax.process_count()
+
+
+def _chain_cost(N: int, loaded: bool) -> float:
+    """A robot configuration's cost against one of ``RATE_CHAIN_WIRES`` wires, kinematic: ``(N/6)^3``
+    (the exact bound); with a load ``2^N N^2`` times that of 6 wires more (the tensions' free sets).
+    Both kept at or below the rates of benchmarks/README.md's "Robots" table."""
+    r = max(N, RATE_CHAIN_WIRES)
+    cost = (r / RATE_CHAIN_WIRES) ** 3
+    return cost + (2**r * r**2) / (2**RATE_CHAIN_WIRES * RATE_CHAIN_WIRES**2) if loaded else cost
 
 
 def about(seconds: float) -> str:
@@ -209,13 +266,19 @@ def _check_work(space: Space, what: str, chunks: int, seconds: float | None) -> 
             f"sample fewer designs, {OVERRIDE}"
         )
     if seconds is not None and seconds > MAX_WORK_S:
-        rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
         raise ValueError(
             f"{what} would take about {about(seconds)} of computing on {jax.process_count()} CPU process(es) "
-            f"(estimated at {rate:.2g} design-poses per second per process for {RATE_WIRES} wires, fewer with "
-            f"more), more than {about(MAX_WORK_S)}; sample fewer designs or a coarser grid, run it on more "
-            f"processes (--distributed), {OVERRIDE}"
+            f"(estimated at {_rate_words(space)}), more than {about(MAX_WORK_S)}; sample fewer designs or a "
+            f"coarser grid, run it on more processes (--distributed), {OVERRIDE}"
         )
+
+
+def _rate_words(space: Space) -> str:
+    """The rate a work estimate rests on, for a message."""
+    if space.segments:
+        return f"{RATE_CHAIN:.2g} design-configurations per second per process for {RATE_CHAIN_WIRES} wires, fewer with more"
+    rate = RATE_KINEMATIC if space.load is None else RATE_LOADED
+    return f"{rate:.2g} design-poses per second per process for {RATE_WIRES} wires, fewer with more"
 
 
 def plan(space: Space, resource_check: bool = True) -> str:
@@ -225,17 +288,17 @@ def plan(space: Space, resource_check: bool = True) -> str:
     (``tension_zones._resources``), or the work more than ``MAX_CHUNKS`` chunks or ``MAX_WORK_S``."""
     from .._resources import check_memory, gb
 
-    n = max(space.n_wires)
+    n = max(space.n_wires, key=lambda k: chunk_memory(space, k))
     memory = chunk_memory(space, n)
+    poses = "configurations" if space.segments else "poses"
     designs = sum(space.count(k) for k in space.n_wires)
-    poses = space.theta_L.size * space.delta.size
     chunks = sum(-(-space.count(k) // space.designs_per_chunk) for k in space.n_wires)
     seconds = work_seconds(space)
-    what = f"exploring {designs:,} designs x {poses:,} poses = {designs * poses:.3g} design-poses"
+    what = f"exploring {designs:,} designs x {space.n_poses:,} {poses} = {designs * space.n_poses:.3g} design-{poses}"
     if resource_check:
         check_memory(
             memory,
-            f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} poses of {n} wires",
+            f"a chunk of {space.designs_per_chunk:,} designs x {space.poses_per_chunk:,} {poses} of {wires_label(n)} wires",
             f'lower the space\'s "chunks" ("poses": the poses per step), {OVERRIDE}',
         )
         _check_work(space, what, chunks, seconds)
@@ -313,7 +376,7 @@ class _Store:
         else:
             self.manifest = {
                 **ident,
-                "done": {str(n): [] for n in space.n_wires},
+                "done": {wires_label(n): [] for n in space.n_wires},
                 "chunks_total": sum(-(-space.count(n) // space.designs_per_chunk) for n in space.n_wires),
                 "complete": False,
             }
@@ -323,8 +386,8 @@ class _Store:
             except OSError as e:
                 raise ValueError(f"cannot write the output folder {str(self.out)!r}: {e.strerror or e}") from None
 
-    def _chunk_path(self, n: int, c: int) -> Path:
-        return self.out / "chunks" / f"n{n}_{c:06d}.npy"
+    def _chunk_path(self, n, c: int) -> Path:
+        return self.out / "chunks" / f"n{wires_label(n)}_{c:06d}.npy"
 
     def _save_manifest(self) -> None:
         _write_atomic(self.manifest_path, lambda p: p.write_text(json.dumps(self.manifest, indent=1)))  # type: ignore[arg-type,return-value]
@@ -332,14 +395,14 @@ class _Store:
     def done(self, n: int) -> dict[int, np.ndarray]:
         """The chunks of ``n`` wires the manifest lists as done, read back (a listed chunk whose file
         has gone is computed again)."""
-        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][str(n)]}
+        paths = {c: self._chunk_path(n, c) for c in self.manifest["done"][wires_label(n)]}
         return {c: np.load(p) for c, p in paths.items() if p.exists()}
 
     def save(self, n: int, c: int, rows: np.ndarray) -> None:
         """One chunk's rows: the file first, then the manifest (a crash between leaves a file that
         the manifest does not list, computed again on resuming: nothing is lost or counted twice)."""
         _write_atomic(self._chunk_path(n, c), lambda p: np.save(p, rows))
-        done = self.manifest["done"][str(n)]
+        done = self.manifest["done"][wires_label(n)]
         if c not in done:
             done.append(c)
         self._save_manifest()
@@ -418,16 +481,17 @@ def _explore(space: Space, store: _Store | None, quiet: bool):
     for n in space.n_wires:
         done = store.done(n) if store is not None else None
         on_chunk = (lambda c, rows, n=n: store.save(n, c, rows)) if store is not None else None
+        theta_L, delta = (space.configs, None) if space.segments else (space.theta_L, space.delta)
         stats = explore_designs(
             space.batch(n),
-            space.theta_L,
-            space.delta,
+            theta_L,
+            delta,
             space.dq,
             space.load,
             designs_per_chunk=space.designs_per_chunk,
             poses_per_chunk=space.poses_per_chunk,
             quiet=quiet,
-            desc=f"{n} wires",
+            desc=f"{wires_label(n)} wires",
             done=done,
             on_chunk=on_chunk,
         )
@@ -518,15 +582,25 @@ def default_front(space: Space) -> list[str]:
     fraction. (The statistics alone mostly improve together with a larger radius and stiffer
     wires, so a front of statistics only often holds one design per wire count.)"""
     third = "deflection_mm_reduced_worst" if space.load is not None else "controllable_fraction"
-    return ["pitch_radius_mm", "dp_max_reduced_worst", third]
+    return ["pitch_radius_mm_max" if space.segments else "pitch_radius_mm", "dp_max_reduced_worst", third]
+
+
+def structure_groups(table: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """``[(label, rows)]``: the designs of each wire count (several segments: each combination of the
+    segments' counts, ``"4+3"``), in order, ``rows`` (N,) bool."""
+    per = sorted(k for k in table if k.startswith("n_wires_"))
+    keys = np.stack([np.asarray(table[k]) for k in per or ["n_wires"]], axis=1)
+    return [
+        (wires_label(tuple(u) if per else u[0]), np.all(keys == u, axis=1)) for u in np.unique(keys, axis=0).tolist()
+    ]
 
 
 def summary(table: dict[str, np.ndarray], seconds: float, columns: Sequence[str]) -> str:
     """One line: what was explored and how the front looks."""
     on = pareto_front(table, columns)
-    counts = sorted(set(table["n_wires"].tolist()))
-    share = ", ".join(f"{n} wires: {int(np.sum(on & (table['n_wires'] == n)))}" for n in counts)
+    groups = structure_groups(table)
+    share = ", ".join(f"{label} wires: {int(np.sum(on & rows))}" for label, rows in groups)
     return (
-        f"explored {table['n_wires'].size} designs ({', '.join(map(str, counts))} wires) in "
+        f"explored {table['n_wires'].size} designs ({', '.join(label for label, _ in groups)} wires) in "
         f"{seconds:.1f} s; Pareto front of {' vs '.join(columns)}: {int(on.sum())} designs ({share})"
     )

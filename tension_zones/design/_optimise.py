@@ -28,12 +28,20 @@ channel forbids part of the circle. Gradients: Adam (optax) on a log-sum-exp sur
 worst case whose sharpness rises geometrically over the run (continuation); the **exact** maximum
 is what is reported, and the best exact objective seen is kept. Several random starts run together
 (``vmap``); each wire count is optimised and the best count reported.
+
+**Several segments** (a scenario with ``segments``): every combination of the segments' wire counts
+is a robot (``_layout``: interleaved wires, each proximal disk's hole circle), optimised by the same
+loop (:func:`_run_starts` with a :class:`_Chain` problem) over each segment's pitch radius, wire
+stiffness and preload, for ``w_p * max dp_max_reduced + w_n * N`` over the task's configurations,
+and ``w_d * max deflection`` under the task's tip load (pull-only tensions over the chain), with
+controllability checked at each configuration (:func:`chain_spread`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+import itertools
 import math
 import time
 from typing import Any
@@ -46,8 +54,10 @@ import optax
 from .._numerics import compact_programs
 from .._xla import fast_compile_options
 from ..model._design import Design
+from ..model._robot import Robot, routing_matrix
 from ..model._zones import tension_mask
-from ._scenario import Scenario
+from ._layout import chain, hole_gaps, interleaved_angles, per_segment, with_numbers
+from ._scenario import Scenario, wires_label
 
 #: Penalty weight on the mean squared controllability violation (objective units per unit^2).
 SPREAD_PENALTY = 1e3
@@ -165,10 +175,14 @@ def _pose_terms(design: Design, theta_L, delta, task: _Task, with_defl: bool = T
     dp = pose_measures(design, theta_L, delta, task.dq, mask=mask)["dp_max"]
     if not with_defl:  # static: a zero deflection weight skips the statics entirely
         return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
-    c = compliance_pose(design, theta_L, delta, task.load)
+    return dp, *_reduced_deflection(compliance_pose(design, theta_L, delta, task.load))
+
+
+def _reduced_deflection(c: dict):
+    """(reduced deflection (mm), statics feasible) of a compliance result: 0 where the wires cannot hold
+    the load pulling only, or the deflection is not finite."""
     ok = c["feasible"] & jnp.isfinite(c["deflection_mm_reduced"])
-    defl = jnp.where(ok, c["deflection_mm_reduced"], 0.0)  # double-where: no NaN in gradients
-    return dp, defl, ok
+    return jnp.where(ok, c["deflection_mm_reduced"], 0.0), ok  # double-where: no NaN in gradients
 
 
 def zone_boundaries(design: Design):
@@ -220,12 +234,16 @@ def _controllability(design: Design, task: _Task):
     the mean squared shortfall below ``min_spread``, the number of checked directions or sectors
     below it, and the smallest spread checked. A task range of zero width (one direction) is
     always checked strictly: that direction is all the task needs."""
-    results = []
-    for spr in (_range_spread(design, task), _sector_spread(design, task)):
-        viol = jnp.maximum(task.min_spread - spr, 0.0)  # 0 for unchecked entries (inf)
-        results.append((jnp.mean(viol**2), jnp.sum(spr < task.min_spread), jnp.min(spr)))
+    results = [_shortfall(spr, task.min_spread) for spr in (_range_spread(design, task), _sector_spread(design, task))]
     strict = task.strict | (task.delta_span <= ZERO_WIDTH_RAD)
     return tuple(jnp.where(strict, a, b) for a, b in zip(*results))
+
+
+def _shortfall(spr, min_spread):
+    """``(penalty, violations, smallest)`` of the spreads ``spr`` checked: the mean squared shortfall
+    below ``min_spread``, how many fall below it, and the smallest (``inf`` entries: not checked)."""
+    viol = jnp.maximum(min_spread - spr, 0.0)  # 0 for unchecked entries (inf)
+    return jnp.mean(viol**2), jnp.sum(spr < min_spread), jnp.min(spr)
 
 
 def _grid_terms(design: Design, task: _Task, with_defl: bool = True):
@@ -247,14 +265,17 @@ def _smooth_max(x, sharpness):
     return m + t * jnp.log(jnp.sum(jnp.exp((x - m) / t)))
 
 
-def _objective(design: Design, task: _Task, n: int, sharpness, with_defl: bool = True):
-    """(smooth objective for gradients, exact objective, exact pieces).
+def _objective(design, task, n: int, sharpness, with_defl: bool = True):
+    """(smooth objective for gradients, exact objective, exact pieces) of a :class:`Design` over its
+    task grid (:class:`_Task`) or of a :class:`Robot` over its configurations (:class:`_ChainTask`);
+    ``n`` the wire count the wire term charges.
 
     Traced in the compact forms (:func:`~tension_zones._numerics.compact_programs`): the optimiser's
     program takes far longer to compile than to run, and the compact forms compile faster.
     """
+    terms = _grid_terms if isinstance(design, Design) else _sample_terms
     with compact_programs():
-        dp, defl, ok, (shortfall, violations, min_spread) = _grid_terms(design, task, with_defl)
+        dp, defl, ok, (shortfall, violations, min_spread) = terms(design, task, with_defl)
     # poses the wires cannot hold without pushing count as a controllability violation too
     penalty = SPREAD_PENALTY * (shortfall + jnp.mean(1.0 - ok))
     wire_cost = task.w_wires * n
@@ -374,26 +395,186 @@ def _base(sc: Scenario, n: int) -> Design:
 
 
 # ---------------------------------------------------------------------------------------------
+# Several segments: each segment's hole circle, wire stiffness and preload over configurations
+# ---------------------------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _ChainBounds:
+    """Each segment's box, (S,) each: pitch radius, wire stiffness, preload (a pytree of arrays)."""
+
+    r_lo: jax.Array
+    r_hi: jax.Array
+    k_lo: jax.Array
+    k_hi: jax.Array
+    p_lo: jax.Array
+    p_hi: jax.Array
+
+
+@dataclasses.dataclass(frozen=True)
+class _ChainTask:
+    """A task of several segments as arrays (a pytree: new values of the same shapes never recompile)."""
+
+    configs: jax.Array  # (M, S, 2) rad
+    dq: jax.Array
+    load: jax.Array  # (3,) N, base frame
+    w_position: jax.Array
+    w_deflection: jax.Array
+    w_wires: jax.Array
+    min_spread: jax.Array
+
+
+for _cls in (_ChainBounds, _ChainTask):
+    jax.tree_util.register_dataclass(_cls, data_fields=[f.name for f in dataclasses.fields(_cls)], meta_fields=[])
+
+
+def _robot(z, b: _ChainBounds, base: Robot) -> Robot:
+    """The robot of box variables ``z["r"], z["k"], z["p"]`` (S,) in [0, 1] (a fixed value's box is one
+    point)."""
+    lerp = lambda key, lo, hi: lo + (hi - lo) * z[key]
+    return with_numbers(
+        base,
+        pitch_radius=lerp("r", b.r_lo, b.r_hi),
+        wire_stiffness=lerp("k", b.k_lo, b.k_hi),
+        preload=lerp("p", b.p_lo, b.p_hi),
+    )
+
+
+def chain_spread(robot: Robot, B):
+    """Smallest singular value of the taut wires' directions at a configuration ``B`` (S, 2): the rows
+    ``[cos a_kj, sin a_kj]`` of each segment ``j`` wire ``k`` crosses (``J_qB`` with unit radii) of the
+    wires in tension; 0 unless they span all ``2S`` bending directions. A one-segment robot gives
+    :func:`spread` (the same rows turned by ``delta``)."""
+    m = robot.tension_mask(B)
+    U = routing_matrix(robot.route_angles, jnp.ones_like(robot.route_radii), robot.crosses)
+    return jnp.linalg.svd(U * m[:, None], compute_uv=False)[-1]
+
+
+def _config_terms(robot: Robot, B, task: _ChainTask, with_defl: bool = True):
+    """(dp_max (mm), reduced deflection (mm), statics feasible) at one configuration ``B`` (S, 2), as
+    :func:`_pose_terms` for a segment: the reduced bound of the wires in tension (``config_measures``)
+    and the reduced deflection under the task's tip load (``model.config_compliance``, pull-only
+    tensions over the whole chain)."""
+    from ..analysis._chain import config_measures
+    from ..model._chain_statics import config_compliance
+
+    dp = config_measures(robot, B, task.dq, robot.tension_mask(B))["dp_max"]
+    if not with_defl:  # static: a zero deflection weight skips the statics entirely
+        return dp, jnp.zeros_like(dp), jnp.ones_like(dp, dtype=bool)
+    return dp, *_reduced_deflection(config_compliance(robot, B, task.load))
+
+
+def _sample_terms(robot: Robot, task: _ChainTask, with_defl: bool = True):
+    """Per-configuration terms over the task's configurations, each (M,), and the controllability
+    check at each configuration (:func:`chain_spread`)."""
+    dp, defl, ok = jax.vmap(lambda B: _config_terms(robot, B, task, with_defl))(task.configs)
+    spr = jax.vmap(lambda B: chain_spread(robot, B))(task.configs)
+    return dp, defl, ok, _shortfall(spr, task.min_spread)
+
+
+def _chain_task(sc: Scenario) -> _ChainTask:
+    f = lambda x: jnp.asarray(x, float)
+    return _ChainTask(
+        f(sc.configs), f(sc.dq), f(sc.load), f(sc.w_position), f(sc.w_deflection), f(sc.w_wires), f(sc.min_spread)
+    )
+
+
+def _chain_bounds(sc: Scenario, counts) -> _ChainBounds | None:
+    """Each segment's box for ``counts`` wires per segment (its pitch radius within its outer diameter
+    and keeping its disk's holes apart, :func:`hole_gaps`); ``None`` where one has no room."""
+    gaps = hole_gaps(interleaved_angles(counts))
+    r = [seg.r_bounds(n, gap) for seg, n, gap in zip(sc.segments, counts, gaps)]
+    if any(lo > hi for lo, hi in r):
+        return None
+    p = [seg.preload_range or (seg.preload, seg.preload) for seg in sc.segments]
+    f = lambda x: jnp.asarray(x, float)
+    cols = [*zip(*r), *zip(*(seg.wire_stiffness for seg in sc.segments)), *zip(*p)]
+    return _ChainBounds(*(f(c) for c in cols))
+
+
+def _base_robot(sc: Scenario, counts) -> Robot:
+    """The robot of ``counts`` wires per segment with the scenario's fixed numbers (its variables are set
+    by :func:`_robot`)."""
+    segs = sc.segments
+    return chain(
+        counts,
+        [s.length for s in segs],
+        [max(s.pitch_radius[1], 1e-3) for s in segs],
+        backbone_EI=[s.backbone_EI for s in segs],
+        preload=[s.preload for s in segs],
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# The problems: what the box variables z are, the subject they make and what is reported of it
+# ---------------------------------------------------------------------------------------------
+#: The box variables, scaled to [0, 1] and projected after every step.
+BOX = ("r", "k", "p")
+
+
+@dataclasses.dataclass(frozen=True)
+class _Segment:
+    """One segment of ``n`` wires (static: one compiled program each): its pitch radius, wire
+    stiffness and, with ``free``, its wire angles (inside the allowed arc with ``arc``)."""
+
+    n: int
+    free: bool
+    arc: bool
+    with_defl: bool
+
+    @property
+    def wires(self) -> int:
+        return self.n
+
+    def subject(self, z, b: _Bounds, base: Design) -> Design:
+        return _design(z, b, self.n, self.free, self.arc, base)
+
+    @staticmethod
+    def numbers(d: Design):
+        """The design's numbers a result reports: pitch radius, wire stiffness, wire angles (n,)."""
+        return d.pitch_radius, d.wire_stiffness, d.wire_angles
+
+
+@dataclasses.dataclass(frozen=True)
+class _Chain:
+    """A robot of ``counts`` wires per segment (static: one compiled program each): each segment's
+    pitch radius, wire stiffness and preload (a variable where its range is not one value)."""
+
+    counts: tuple[int, ...]
+    with_defl: bool
+
+    @property
+    def wires(self) -> int:
+        return sum(self.counts)
+
+    @staticmethod
+    def subject(z, b: _ChainBounds, base: Robot) -> Robot:
+        return _robot(z, b, base)
+
+    @staticmethod
+    def numbers(robot: Robot):
+        """The robot's numbers a result reports: per segment (S,) pitch radius, wire stiffness, preload."""
+        return tuple(per_segment(robot, f) for f in ("pitch_radius", "wire_stiffness", "preload"))
+
+
+# ---------------------------------------------------------------------------------------------
 # The run
 # ---------------------------------------------------------------------------------------------
-@functools.partial(
-    jax.jit, static_argnames=("n", "free", "arc", "steps", "with_defl"), compiler_options=fast_compile_options()
-)
-def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n, free, arc, steps, with_defl):
+@functools.partial(jax.jit, static_argnames=("problem", "steps"), compiler_options=fast_compile_options())
+def _run_starts(z0, bounds, task, base, lr, sharp0, *, problem, steps):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
 
-    Returns per start: the best rank (exact objective, plus INFEASIBLE_RANK per violating pose); that
-    iterate's design numbers (pitch radius, wire stiffness, wire angles (n,)), exact objective and
-    pieces (:func:`_objective`); and the best-so-far rank after every step, (starts, steps).
+    ``problem`` (static, :class:`_Segment` or :class:`_Chain`) makes the subject of ``z`` and says
+    which of its numbers a result reports. Returns per start: the best rank (exact objective, plus
+    INFEASIBLE_RANK per violating pose); that iterate's numbers, exact objective and pieces
+    (:func:`_objective`); and the best-so-far rank after every step, (starts, steps).
     """
     opt = optax.adam(lr)
 
     def loss(z, sharp):
-        d = _design(z, bounds, n, free, arc, base)
-        smooth, exact, p = _objective(d, task, n, sharp, with_defl)
+        d = problem.subject(z, bounds, base)
+        smooth, exact, p = _objective(d, task, problem.wires, sharp, problem.with_defl)
         # rank iterates by the exact objective, feasible ones first
         rank = exact + INFEASIBLE_RANK * (p["violations"] + p["statics_infeasible"])
-        return smooth, (rank, ((d.pitch_radius, d.wire_stiffness, d.wire_angles), exact, p))
+        return smooth, (rank, (problem.numbers(d), exact, p))
 
     def one_start(z):
         state = opt.init(z)
@@ -409,7 +590,7 @@ def _run_starts(z0, bounds: _Bounds, task: _Task, base: Design, lr, sharp0, *, n
             best_out = jax.tree_util.tree_map(lambda a, b: jnp.where(improved, a, b), out, best_out)
             upd, state = opt.update(g, state, z)
             z = optax.apply_updates(z, upd)
-            z = {**z, "r": jnp.clip(z["r"], 0.0, 1.0), "k": jnp.clip(z["k"], 0.0, 1.0)}
+            z = {k: jnp.clip(v, 0.0, 1.0) if k in BOX else v for k, v in z.items()}
             return (z, state, best, best_out), jnp.where(jnp.isnan(best), jnp.inf, best)
 
         # one pass more than the steps: it ranks the last step's result (its update goes unused), and
@@ -441,77 +622,148 @@ def _initial(key, S: int, n: int, n_gaps: int) -> dict:
     return z
 
 
-def _result_row(sc: Scenario, n, d: Design, exact, pieces) -> dict[str, Any]:
-    """One wire count's result. With a deflection weight of 0 the statics are never computed: their
-    figures are NaN (``null`` in ``result.json``), not 0, and feasibility is controllability alone."""
+@functools.partial(jax.jit, static_argnames=("starts", "segments"))
+def _initial_box(key, starts: int, segments: int) -> dict:
+    """``starts`` starts' box variables of a robot, each (starts, segments); start 0 mid-range."""
+    return {
+        k: jax.random.uniform(sub, (starts, segments)).at[0].set(0.5) for k, sub in zip(BOX, jax.random.split(key, 3))
+    }
+
+
+def _figures(sc: Scenario, exact, pieces, zero_width=None) -> dict[str, Any]:
+    """A result's objective, its pieces and feasibility (``zero_width``: one segment's single
+    directions, :func:`zero_width_directions`). With a deflection weight of 0 the statics are never
+    computed: their figures are NaN (``null`` in ``result.json``), not 0, and feasibility is
+    controllability alone."""
     statics = sc.w_deflection > 0
     infeasible = int(pieces["statics_infeasible"]) if statics else math.nan
-    return {
-        "n_wires": n,
-        "pitch_radius_mm": float(d.pitch_radius),
-        "wire_stiffness_N_per_mm": float(d.wire_stiffness),
-        "wire_angles_deg": [float(a) for a in np.mod(np.degrees(np.asarray(d.wire_angles)), 360.0)],
+    out = {
         "objective": float(exact),
         "worst_position_uncertainty_mm": float(pieces["worst_dp"]),
         "worst_deflection_mm": float(pieces["worst_defl"]) if statics else math.nan,
         "min_spread": float(pieces["min_spread"]),
         "spread_violations": int(pieces["violations"]),
-        "zero_width_directions_deg": zero_width_directions(sc, d),
-        "statics_infeasible_poses": infeasible,
-        "feasible": bool(int(pieces["violations"]) == 0 and (not statics or infeasible == 0)),
+    }
+    if zero_width is not None:
+        out["zero_width_directions_deg"] = zero_width
+    out["statics_infeasible_poses"] = infeasible
+    out["feasible"] = bool(int(pieces["violations"]) == 0 and (not statics or infeasible == 0))
+    return out
+
+
+def _result_row(sc: Scenario, n, d: Design, exact, pieces) -> dict[str, Any]:
+    """One wire count's result."""
+    return {
+        "n_wires": n,
+        "pitch_radius_mm": float(d.pitch_radius),
+        "wire_stiffness_N_per_mm": float(d.wire_stiffness),
+        "wire_angles_deg": [float(a) for a in np.mod(np.degrees(np.asarray(d.wire_angles)), 360.0)],
+        **_figures(sc, exact, pieces, zero_width_directions(sc, d)),
     }
 
 
-def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
-    """Optimise every candidate wire count; return the ``result.json`` dictionary.
+def _chain_row(sc: Scenario, robot: Robot, exact, pieces) -> dict[str, Any]:
+    """One combination of wire counts' result: per segment (proximal first) its numbers, the figures,
+    and the robot as a design-file dict (``design``, read by :meth:`Robot.from_dict`)."""
+    per = lambda f: np.asarray(per_segment(robot, f)).tolist()
+    return {
+        "n_wires": list(robot.n_wires_per_segment),
+        "pitch_radius_mm": per("pitch_radius"),
+        "wire_stiffness_N_per_mm": per("wire_stiffness"),
+        "preload_N": per("preload"),
+        "wire_angles_deg": [np.mod(s.wire_angles_deg, 360.0).tolist() for s in robot.segments],
+        **_figures(sc, exact, pieces),
+        "design": robot.to_dict(),
+    }
+
+
+def _best_start(best, out):
+    """The best start's numbers, exact objective and pieces (NumPy), and its index."""
+    i = int(np.argmin(np.asarray(best)))
+    return jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out), i
+
+
+def _run_segment(sc: Scenario, n: int, key):
+    """One wire count's search: its result row and best-so-far history (best start)."""
+    bounds, base = _bounds(sc, n), _base(sc, n)
+    free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
+    z0 = _initial(key, S=sc.starts, n=n, n_gaps=n + 1 if arc else n)
+    problem = _Segment(n, free, arc, sc.w_deflection > 0)
+    best, out, h = _run_starts(
+        z0,
+        bounds,
+        _task(sc),
+        base,
+        jnp.asarray(sc.learning_rate),
+        jnp.asarray(sc.sharpness),
+        problem=problem,
+        steps=sc.steps,
+    )
+    ((r, k, angles), exact, pieces), i = _best_start(best, out)
+    d = base.replace(pitch_radius=float(r), wire_stiffness=float(k), wire_angles=angles)
+    return _result_row(sc, n, d, exact, pieces), np.asarray(h[i]).tolist()
+
+
+def _run_chain(sc: Scenario, counts: tuple[int, ...], key):
+    """One combination of wire counts' search (several segments): its result row and history."""
+    base = _base_robot(sc, counts)
+    z0 = _initial_box(key, starts=sc.starts, segments=len(counts))
+    best, out, h = _run_starts(
+        z0,
+        _chain_bounds(sc, counts),
+        _chain_task(sc),
+        base,
+        jnp.asarray(sc.learning_rate),
+        jnp.asarray(sc.sharpness),
+        problem=_Chain(counts, sc.w_deflection > 0),
+        steps=sc.steps,
+    )
+    ((r, k, p), exact, pieces), i = _best_start(best, out)
+    robot = with_numbers(base, pitch_radius=r, wire_stiffness=k, preload=p)
+    return _chain_row(sc, robot, exact, pieces), np.asarray(h[i]).tolist()
+
+
+def structures(sc: Scenario) -> list:
+    """What the optimiser searches one after the other: the wire counts of one segment, or every
+    combination of the segments' counts (tuples, proximal first)."""
+    if not sc.segments:
+        return list(sc.n_wires)
+    return list(itertools.product(*(seg.n_wires for seg in sc.segments)))
+
+
+def _fits(sc: Scenario, n) -> bool:
+    if sc.segments:
+        return _chain_bounds(sc, n) is not None
+    r_lo, r_hi = _r_range(sc, n)
+    return r_lo <= r_hi
+
+
+def optimize(sc: Scenario, progress: bool = True, start: Design | Robot | None = None) -> dict[str, Any]:
+    """Optimise every candidate wire count (several segments: every combination); return the
+    ``result.json`` dictionary.
 
     ``history`` (per wire count: the best exact objective after each step, best start) is included
-    for the convergence plot.
+    for the convergence plot. ``start``: the design the search starts from (``optimize --design``, a
+    calibrated robot, with the scenario of :func:`~._scenario.for_robot`), evaluated as it is under
+    the scenario (its own layout and routing) into ``start``, to set the best against.
     """
     from tqdm.auto import tqdm
 
     t0 = time.perf_counter()
-    task = _task(sc)
     key = jax.random.PRNGKey(sc.seed)
     rows, hist, evaluations = [], {}, 0
-    counts = tqdm(sc.n_wires, desc="wire counts", disable=not progress, leave=False)
-    for n in counts:
-        r_lo, r_hi = _r_range(sc, n)
-        if r_lo > r_hi:
-            rows.append(
-                {
-                    "n_wires": n,
-                    "feasible": False,
-                    "reason": "the geometric constraints leave no room for this many wires",
-                }
-            )
+    for n in tqdm(structures(sc), desc="wire counts", disable=not progress, leave=False):
+        if not _fits(sc, n):
+            reason = "the geometric constraints leave no room for this many wires"
+            rows.append({"n_wires": n if isinstance(n, int) else list(n), "feasible": False, "reason": reason})
             continue
         key, sub = jax.random.split(key)
-        bounds, base = _bounds(sc, n), _base(sc, n)
-        free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
-        z0 = _initial(sub, S=sc.starts, n=n, n_gaps=n + 1 if arc else n)
-        best, out, h = _run_starts(
-            z0,
-            bounds,
-            task,
-            base,
-            jnp.asarray(sc.learning_rate),
-            jnp.asarray(sc.sharpness),
-            n=n,
-            free=free,
-            arc=arc,
-            steps=sc.steps,
-            with_defl=sc.w_deflection > 0,
-        )
+        row, hist[wires_label(n)] = (_run_chain if sc.segments else _run_segment)(sc, n, sub)
+        rows.append(row)
         evaluations += sc.starts * (sc.steps + 1)
-        i = int(np.argmin(np.asarray(best)))
-        (r, k, angles), exact, pieces = jax.tree_util.tree_map(lambda a: np.asarray(a[i]), out)  # noqa: B023  (called at once)
-        d = base.replace(pitch_radius=float(r), wire_stiffness=float(k), wire_angles=angles)
-        rows.append(_result_row(sc, n, d, exact, pieces))
-        hist[str(n)] = np.asarray(h[i]).tolist()
     feasible = [r for r in rows if r.get("feasible")]
     best_row = min(feasible, key=lambda r: r["objective"]) if feasible else None
-    return {
+    out = {
         "best": best_row,
         "strict_controllability": sc.strict_controllability,
         "per_wire_count": rows,
@@ -519,10 +771,23 @@ def optimize(sc: Scenario, progress: bool = True) -> dict[str, Any]:
         "evaluations": evaluations,
         "history": hist,
     }
+    if start is not None:
+        if isinstance(start, Robot) and start.n_segments == 1:
+            start = start.segments[0]
+        out["start"] = evaluate_design(sc, start)
+    return {"segments": len(sc.segments), **out} if sc.segments else out
 
 
-def evaluate_design(sc: Scenario, design: Design) -> dict[str, Any]:
-    """The exact objective and its pieces for a given design under a scenario (e.g. to check a
-    hand-made design, or the evenly spaced one, against the constraints)."""
+def evaluate_design(sc: Scenario, design: Design | Robot) -> dict[str, Any]:
+    """The exact objective and its pieces for a given design (a :class:`Robot` under a scenario of
+    several segments) under a scenario (e.g. to check a hand-made design, or the evenly spaced one,
+    against the constraints)."""
+    if isinstance(design, Robot):
+        if design.n_segments != len(sc.segments):
+            raise ValueError(f"the robot has {design.n_segments} segment(s), the scenario {len(sc.segments) or 1}")
+        _, exact, pieces = _objective_jit(design, _chain_task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
+        return _chain_row(sc, design, exact, pieces)
+    if sc.segments:
+        raise ValueError(f"the scenario has {len(sc.segments)} segments: evaluate a Robot")
     _, exact, pieces = _objective_jit(design, _task(sc), design.n_wires, 1.0, sc.w_deflection > 0)
     return _result_row(sc, design.n_wires, design, exact, pieces)

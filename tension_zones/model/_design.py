@@ -280,11 +280,19 @@ class _NonFinite:
         self.text = text
 
 
+class _Repeated(dict):
+    """An object whose key ``repeated`` appears twice, until its place is known (:func:`_check_tree`)."""
+
+    repeated: str
+
+
 def _unique_keys(pairs):
     seen = {}
     for k, v in pairs:
         if k in seen:
-            raise _BadJSON(f"key {k!r} appears twice (JSON keys must be unique)")
+            out = _Repeated(seen)
+            out.repeated = k
+            return out
         seen[k] = v
     return seen
 
@@ -304,6 +312,9 @@ def _check_tree(value, where: str = "", depth: int = 1) -> None:
     """Refuse nesting deeper than :data:`MAX_JSON_DEPTH` and the non-finite stand-ins, naming the key."""
     if isinstance(value, _NonFinite):
         raise _BadJSON(f"key {where or '(top level)'!r} is {value.text}; only finite numbers are allowed")
+    if isinstance(value, _Repeated):
+        key = f"{where}.{value.repeated}" if where else value.repeated
+        raise _BadJSON(f"key {key!r} appears twice (JSON keys must be unique)")
     if not isinstance(value, (dict, list)):
         return
     if depth > MAX_JSON_DEPTH:
