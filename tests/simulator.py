@@ -362,32 +362,34 @@ class _Robot:
         return ps, Rs, np.concatenate(pts), np.concatenate(wts)
 
     def load(self, X):
-        """The load's potential for a batch of configurations ``X`` (K, 2S), vectorised over K (the
-        load's gradient is taken by central differences of it)."""
+        """The load's potential for a batch of configurations ``X`` (K, 2S), vectorised over K and the
+        pieces (the load's gradient is taken by central differences of it); the chain's composition
+        piece by piece."""
         K = X.shape[0]
         B = X.reshape(K, self.S, 2)
+        u, v = B[..., 0], B[..., 1]  # (K, S)
+        phi, sig = np.hypot(u, v), np.arctan2(v, u)
+        L = np.asarray(self.L, float)
+        s = np.concatenate([0.5 * L[:, None] * (_GL[0] + 1.0), L[:, None]], axis=1)  # (S, 9): quadrature, end disk
+        ph = phi[:, :, None] * s / L[:, None]  # (K, S, 9)
+        small = ph < 1e-6
+        safe = np.where(small, 1.0, ph)
+        lat = np.where(small, s * ph / 2, s * (1 - np.cos(ph)) / safe)  # rho (1 - cos)
+        ax = np.where(small, s * np.ones_like(ph), s * np.sin(ph) / safe)
+        local = np.stack([lat * np.cos(sig)[..., None], lat * np.sin(sig)[..., None], ax], axis=-1)  # (K, S, 9, 3)
+        # each piece's rotation, Rodrigues about the unit axis (kx, ky, 0): I + sin K + (1 - cos) K^2
+        bent = phi > 1e-12
+        kx = np.where(bent, -v / np.where(bent, phi, 1.0), 0.0)
+        ky = np.where(bent, u / np.where(bent, phi, 1.0), 0.0)
+        Kx = np.zeros((K, self.S, 3, 3))
+        Kx[..., 0, 2], Kx[..., 1, 2], Kx[..., 2, 0], Kx[..., 2, 1] = ky, -kx, -ky, kx
+        Rj = np.eye(3) + np.sin(phi)[..., None, None] * Kx + (1 - np.cos(phi))[..., None, None] * (Kx @ Kx)
+        w = 0.5 * L[:, None] * _GL[1]  # (S, 8) the weight's quadrature weights
         p, R, M = np.zeros((K, 3)), np.tile(np.eye(3), (K, 1, 1)), np.zeros((K, 3))
         for j in range(self.S):
-            L = self.L[j]
-            u, v = B[:, j, 0], B[:, j, 1]
-            phi, sig = np.hypot(u, v), np.arctan2(v, u)
-            s = np.r_[0.5 * L * (_GL[0] + 1.0), L]  # the weight's quadrature points, then the end disk
-            ph = phi[:, None] * s[None, :] / L
-            small = ph < 1e-6
-            lat = np.where(small, s * ph / 2, s * (1 - np.cos(ph)) / np.where(small, 1.0, ph))  # rho (1 - cos)
-            ax = np.where(small, s * np.ones_like(ph), s * np.sin(ph) / np.where(small, 1.0, ph))
-            local = np.stack([lat * np.cos(sig)[:, None], lat * np.sin(sig)[:, None], ax], axis=-1)  # (K, 9, 3)
-            world = p[:, None, :] + np.einsum("kij,kqj->kqi", R, local)
-            M += np.einsum("q,kqi->ki", 0.5 * L * _GL[1], world[:, :-1])
-            th = phi
-            kx, ky = (
-                np.where(th > 1e-12, -v / np.where(th > 1e-12, th, 1.0), 0.0),
-                np.where(th > 1e-12, u / np.where(th > 1e-12, th, 1.0), 0.0),
-            )
-            Kx = np.zeros((K, 3, 3))
-            Kx[:, 0, 2], Kx[:, 1, 2], Kx[:, 2, 0], Kx[:, 2, 1] = ky, -kx, -ky, kx
-            Rj = np.eye(3) + np.sin(th)[:, None, None] * Kx + (1 - np.cos(th))[:, None, None] * (Kx @ Kx)
-            p, R = world[:, -1], R @ Rj
+            world = p[:, None, :] + local[:, j] @ R.transpose(0, 2, 1)
+            M += w[j] @ world[:, :-1]
+            p, R = world[:, -1], R @ Rj[:, j]
         return -(p @ self.f) - (M @ self.g)
 
     def energy(self, x, q, t, short=0.0):
