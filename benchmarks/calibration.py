@@ -51,7 +51,12 @@ def run(code_root: Path, args: list[str], cache: str | None = None) -> dict:
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     t0 = time.perf_counter()
     r = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(code_root), *args], capture_output=True, text=True, env=env, timeout=7200
+        [sys.executable, "-c", _CHILD, str(code_root), *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=7200,
+        check=False,
     )
     wall = time.perf_counter() - t0
     m = re.search(r"SECONDS ([\d.]+) RC (\d+)", r.stdout)
@@ -147,8 +152,10 @@ def main(argv=None):
 
 def markdown(res) -> str:
     lines = [
-        f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
-        f"({res['load_at_start']}).",
+        (
+            f"`python benchmarks/calibration.py {res.get('argv', '--baseline DIR')}`, started {res['started']} "
+            f"({res['load_at_start']})."
+        ),
         "",
         (
             "| case | code | compilation cache | worker processes | seconds (in process) | wall seconds (fresh "

@@ -117,8 +117,10 @@ def main(argv=None):
         "FTDCR v4 (3 segments, 9 wires)": tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json")),
     }
     lines = [
-        f"`python benchmarks/rod.py`, started {started} ({load0}); {N} samples per call, float64, "
-        "best of three after compilation.",
+        (
+            f"`python benchmarks/rod.py`, started {started} ({load0}); {N} samples per call, float64, "
+            "best of three after compilation."
+        ),
         "",
         "| robot | pieces per segment | load | compile (s) | tip, us/sample | Jacobian in 3 parameters, us/sample |",
         "|---|---:|---|---:|---:|---:|",
@@ -135,8 +137,10 @@ def main(argv=None):
     acc = accuracy()
     lines += [
         "",
-        "Tip error (mm) against the Kirchhoff rod (`tests/reference_rod.py`, same tendon tensions), "
-        "60 mm segment, EI 2454 N mm^2:",
+        (
+            "Tip error (mm) against the Kirchhoff rod (`tests/reference_rod.py`, same tendon tensions), "
+            "60 mm segment, EI 2454 N mm^2:"
+        ),
         "",
         "| load | " + " | ".join(f"{m} pieces" for m in PIECES + (16,)) + " |",
         "|---|" + "---:|" * (len(PIECES) + 1),

@@ -29,9 +29,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-import numpy_baselines as nb  # noqa: E402
+import numpy_baselines as nb
 
-import tension_zones as tz  # noqa: E402
+import tension_zones as tz
 
 REPEATS = 5
 
@@ -63,10 +63,10 @@ def bench_kinematics(quick):
         n_big = th_big.size * de_big.size
         n_loop = th_small[:: (6 if n == 8 else 1)].size * de_small.size
         # the per-pose loop is slow (3^n columns): timed on (a slice of) the paper grid
-        loop = lambda: nb.measures_loop(  # noqa: E731
+        loop = lambda alpha=alpha, n=n: nb.measures_loop(
             20.0, 2.0, alpha, th_small[:: (6 if n == 8 else 1)], de_small, 0.4
         )
-        vec = lambda: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4)  # noqa: E731
+        vec = lambda alpha=alpha: nb.measures_vectorised(20.0, 2.0, alpha, th_big, de_big, 0.4)
 
         def jax_run(design=d):
             return sweep_grid(pose_metrics, design, th_big, de_big, 0.4, quiet=True)
@@ -81,7 +81,7 @@ def bench_kinematics(quick):
             t_j.append(_seconds(jax_run))
         t_jax = statistics.median(t_j)
         # new values of the same shapes: no recompile (second design, timed like the median)
-        t_new_values = _seconds(lambda: jax_run(d.replace(pitch_radius=2.5, length=25.0)))
+        t_new_values = _seconds(lambda d=d: jax_run(d.replace(pitch_radius=2.5, length=25.0)))
         rows.append(
             {
                 "n_wires": n,
@@ -111,7 +111,7 @@ def bench_compliance(quick):
     for n in (3, 4):
         d = tz.Design(n, 20.0, 2.0)
         alpha = np.asarray(d.wire_angles)
-        loop = lambda stiffness=True: nb.compliance_scipy_loop(  # noqa: E731
+        loop = lambda stiffness=True, d=d, alpha=alpha: nb.compliance_scipy_loop(
             20.0, 2.0, alpha, float(d.backbone_EI), float(d.wire_stiffness), th, de, w, stiffness=stiffness
         )
         ref, ours = loop(), compliance_grid(d, w, np.degrees(th), np.degrees(de))  # also warm-up
@@ -121,7 +121,7 @@ def bench_compliance(quick):
         # the batched path on a grid 100x larger, so the timer sees real work
         th_b = np.radians(np.linspace(89.0, 45.0, 100))
         de_b = np.radians(np.arange(0.0, 360.0, 0.15))
-        jax_run = lambda: compliance_grid(d, w, np.degrees(th_b), np.degrees(de_b))  # noqa: E731
+        jax_run = lambda d=d, th_b=th_b, de_b=de_b: compliance_grid(d, w, np.degrees(th_b), np.degrees(de_b))
         t0 = time.perf_counter()
         jax_run()
         first = time.perf_counter() - t0
@@ -132,7 +132,7 @@ def bench_compliance(quick):
         t_s, t_o, t_j = [], [], []
         for _ in range(3 if quick else REPEATS):
             t_s.append(_seconds(loop))
-            t_o.append(_seconds(lambda: loop(stiffness=False)))
+            t_o.append(_seconds(lambda loop=loop: loop(stiffness=False)))
             t_j.append(_seconds(jax_run))
         n_loop, n_jax = th.size * de.size, th_b.size * de_b.size
         rows.append(
@@ -180,7 +180,12 @@ def _child(args, env_extra=None):
     env = dict(os.environ)
     env.update(env_extra or {})
     r = subprocess.run(
-        [sys.executable, "-c", _SCALING_CHILD, *map(str, args)], env=env, capture_output=True, text=True, timeout=3600
+        [sys.executable, "-c", _SCALING_CHILD, *map(str, args)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=3600,
+        check=False,
     )
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
@@ -251,8 +256,10 @@ def markdown(res) -> str:
         out += [
             "### Kinematic measures (KCI, sigma_min, dp_max, dw_max; full and reduced)",
             "",
-            "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
-            "x loop | x NumPy | compile (s) | target |",
+            (
+                "| wires | per-pose loop (poses/s) | vectorised NumPy (poses/s) | JAX (poses/s) | "
+                "x loop | x NumPy | compile (s) | target |"
+            ),
             "|---|---|---|---|---|---|---|---|",
         ]
     for r in res.get("kinematics", []):
@@ -274,9 +281,11 @@ def markdown(res) -> str:
             "",
             "### Compliance sweep (tension solve + stiffness + deflection)",
             "",
-            "| wires | per pose: SLSQP + NumPy (poses/s) | JAX batched (poses/s) | speed-up | "
-            "SLSQP alone (poses/s) | x SLSQP alone | "
-            "compile (s) | max rel. difference | target |",
+            (
+                "| wires | per pose: SLSQP + NumPy (poses/s) | JAX batched (poses/s) | speed-up | "
+                "SLSQP alone (poses/s) | x SLSQP alone | "
+                "compile (s) | max rel. difference | target |"
+            ),
             "|---|---|---|---|---|---|---|---|---|",
         ]
         for r in res["compliance"]:
@@ -342,7 +351,11 @@ def bench_calibration(quick):
     """A 500-sample set from the project's own simulator (undeclared backlash), full library, a fresh
     process: what a lab engineer waits for, compile included."""
     r = subprocess.run(
-        [sys.executable, "-c", _CALIB_CHILD, str(HERE.parent / "tests")], capture_output=True, text=True, timeout=1800
+        [sys.executable, "-c", _CALIB_CHILD, str(HERE.parent / "tests")],
+        capture_output=True,
+        text=True,
+        timeout=1800,
+        check=False,
     )
     if r.returncode != 0:
         raise RuntimeError(r.stderr[-2000:])
