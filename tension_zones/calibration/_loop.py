@@ -78,7 +78,7 @@ from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
 from ._register import GlobalRegistration, global_registration, kabsch, rotation_vector
-from ._rounds import BranchEnd, JointLook, LookAhead, Refit, Removal, Round
+from ._rounds import BranchEnd, JointLook, LookAhead, Refit, Removal, Round, Score
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -178,7 +178,7 @@ class Result:
             "noise": self.noise,
             "nominal_parameters": list(self.nominal),
             "effects": self.effects,
-            "candidates": self.candidates,
+            "candidates": [c.to_dict() for c in self.candidates],
             "rounds": [rd.to_dict() for rd in self.rounds],
             "steps": self.steps,
             "unexplained_structure": self.unexplained_structure,
@@ -334,7 +334,9 @@ class _Loop:
         if scored is None:
             return False
         scores, r, z_crit = scored
-        chosen = self.screen(st, scores, r, z_crit)[:TRIES_PER_ROUND]
+        scores, chosen = self.screen(st, scores, r, z_crit)
+        st.candidates.extend(scores)
+        chosen = chosen[:TRIES_PER_ROUND]
         tried = self.refit(st, chosen, r)
         m, unit = self.m, self.unit_of(st.err)
         good = sorted((t for t in tried if t.significant), key=lambda t: t.err)
@@ -348,9 +350,9 @@ class _Loop:
         return self.keep(st, tried, good[0] if good else None, info)
 
     def score(self, st: _Branch) -> tuple | None:
-        """The score test of every candidate not in ``st``'s model on its held-out residual, recorded in
-        ``st.candidates`` (highest first). Returns the scores, the residual (every sample) and the
-        round's critical z-value, or None where no candidate is left to score."""
+        """The score test of every candidate not in ``st``'s model on its held-out residual. Returns the
+        scores (highest first), the residual (every sample) and the round's critical z-value, or None
+        where no candidate is left to score."""
         pb, sl, P, blocks, sigma = self.pb, self.sl, self.pb.null.size, self.blocks, self.sigma
         rnd, theta, active = st.rnd, st.theta, st.active
         remaining = [n for n in self.cand_names if n not in active]
@@ -386,38 +388,23 @@ class _Loop:
         scores = []
         for name in remaining:
             s = score_test(r_held, J_held, active_cols, np.arange(P)[sl[name]], sigma_score, wts)
-            scores.append(
-                {
-                    "round": rnd,
-                    "name": name,
-                    "score": s["score"],
-                    "dof": s["dof"],
-                    "explained_rmse_mm": math.sqrt(max(s["explained_mm2"], 0.0)),
-                }
-            )
-        scores.sort(key=lambda d: -d["score"])
+            explained = math.sqrt(max(s["explained_mm2"], 0.0))
+            scores.append(Score(round=rnd, name=name, score=s["score"], dof=s["dof"], explained_rmse_mm=explained))
+        scores.sort(key=lambda c: -c.score)
         scores += [
-            {
-                "round": rnd,
-                "name": n,
-                "score": 0.0,
-                "dof": int(sl[n].stop - sl[n].start),
-                "explained_rmse_mm": 0.0,
-                "not_scored": "the model has no load",
-            }
-            for n in idle
+            Score(rnd, n, 0.0, int(sl[n].stop - sl[n].start), 0.0, not_scored="the model has no load") for n in idle
         ]
-        st.candidates.extend(scores)
         z_crit = _norm_isf(self.alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
-        self.say(f"round {rnd}: " + ", ".join(f"{s['name']} {s['score']:.1f}" for s in scores))
+        self.say(f"round {rnd}: " + ", ".join(f"{s.name} {s.score:.1f}" for s in scores))
         return scores, r, z_crit
 
-    def screen(self, st: _Branch, scores: list, r: np.ndarray, z_crit: float) -> list:
+    def screen(self, st: _Branch, scores: list[Score], r: np.ndarray, z_crit: float) -> tuple:
         """The candidates of a round that go on to full refits, best first: the significant ones, or on
         a second look every positive score; where many (or the rod's among several), only the best of
-        those whose short refit lowered the held-out error enough."""
+        those whose short refit lowered the held-out error enough. Returns the round's scores with
+        what the screen added to them, and those candidates."""
         pb, sl, m, alpha, theta, active, err = self.pb, self.sl, self.m, self.alpha, st.theta, st.active, st.err
-        significant = [s for s in scores if s["score"] > z_crit]
+        significant = [s for s in scores if s.score > z_crit]
         # the score test is first order: an effect whose parameters act nonlinearly once the others
         # are refitted with it (the rod's curvature freedom beside a preload: score 3.0 against a
         # critical 3.7, yet a short refit takes the held-out error to the noise floor) can explain
@@ -438,34 +425,32 @@ class _Loop:
             and _flagged({**structure_test(r[self.held], self.held_feats, self.sigma), "excess_over_noise": excess})
         )
         if second_look:
-            significant = [s for s in scores if s["score"] > 0 and "not_scored" not in s]
-            for s in significant:
-                s["second_look"] = True
+            significant = [
+                dataclasses.replace(s, second_look=True) for s in scores if s.score > 0 and s.not_scored is None
+            ]
         unit = self.unit_of(err)
         if (
             second_look
             or len(significant) > TRIES_PER_ROUND
-            or (len(significant) > 1 and any(self.blocks[s["name"]].pieces_for(self.model) > 1 for s in significant))
+            or (len(significant) > 1 and any(self.blocks[s.name].pieces_for(self.model) > 1 for s in significant))
         ):
             # screen: a short refit of every significant candidate, then the full refits of the best
             # (also where fewer are significant but one of them is the rod's, whose full refit costs
             # as much as several of the others')
-            jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in significant]
-            for s, e in zip(significant, self.run.map("screen", jobs)):
-                s["screened_rmse_mm"] = e
-            self.say("  screened: " + ", ".join(f"{s['name']} {s['screened_rmse_mm']:.4f}" for s in significant))
+            jobs = [(_reset(theta, sl[s.name], pb.start), active + [s.name]) for s in significant]
+            done = self.run.map("screen", jobs)
+            self.say("  screened: " + ", ".join(f"{s.name} {e:.4f}" for s, e in zip(significant, done)))
             # a candidate whose short refit does not lower the held-out error by a quarter of the drop
             # the refit's test needs is unlikely to pass it (near the optimum a few Levenberg-Marquardt
             # steps take most of the gain): it goes no further. On FTDCR v4 this spares seven full
             # refits (three of them the rod's, the costliest), each of which fails its test when run;
             # every candidate screened out there has a higher held-out error after its short refit
             # than without it
-            for s in significant:
-                s["screened_drop"] = (err**2 - s["screened_rmse_mm"] ** 2) * m / unit
-                s["screened_needed"] = 0.25 * chi2_quantile(alpha, max(s["dof"], 1))
-                s["screened_out"] = bool(s["screened_drop"] < s["screened_needed"])
-            significant = sorted((s for s in significant if not s["screened_out"]), key=lambda s: s["screened_rmse_mm"])
-        return significant
+            screened = [_screened(s, e, (err**2 - e**2) * m / unit, alpha) for s, e in zip(significant, done)]
+            scores = [next((s for s in screened if s.name == c.name), c) for c in scores]
+            ranked = sorted(((e, s) for s, e in zip(screened, done) if not s.screened_out), key=lambda p: p[0])
+            significant = [s for _, s in ranked]
+        return scores, significant
 
     def refit(self, st: _Branch, chosen: list, r: np.ndarray) -> list[Refit]:
         """The full refits of the ``chosen`` candidates on ``st``'s model and their tests (the module's
@@ -474,14 +459,14 @@ class _Loop:
         train, sigma, floor, unit = self.train, self.sigma, self.noise["floor_mm"], self.unit_of(err)
         decision_error = self.fits.decision_error
         tried = []
-        jobs = [(_reset(theta, sl[s["name"]], pb.start), active + [s["name"]]) for s in chosen]
+        jobs = [(_reset(theta, sl[s.name], pb.start), active + [s.name]) for s in chosen]
         # an effect of the clock must also predict the later samples from the earlier ones
-        timed = [i for i, s in enumerate(chosen) if getattr(self.blocks[s["name"]], "of_time", False)]
+        timed = [i for i, s in enumerate(chosen) if getattr(self.blocks[s.name], "of_time", False)]
         done = self.run.map("refit", jobs) + self.run.map("later", [(*jobs[i], theta, active) for i in timed])
         later = dict(zip(timed, done[len(jobs) :]))
         for i, (s, (th_new, plain_new, err_new, r_new)) in enumerate(zip(chosen, done)):
             drop = (err**2 - err_new**2) * m / unit
-            need = chi2_quantile(alpha, max(s["dof"], 1))
+            need = chi2_quantile(alpha, max(s.dof, 1))
             # the training part's gain, tested the same way: not a share of the held-out gain, since the
             # parts' mixes of motions differ (on FTDCR v4 the single-tendon pulls are a third of the
             # training excess and a sixth of the held-out one, and no effect but the preload moves them)
@@ -493,7 +478,7 @@ class _Loop:
                 drop > need
                 and err_new < (1.0 - self.min_gain) * err
                 and drop_train > need
-                and (not s.get("second_look") or share >= SECOND_LOOK_SHARE)
+                and (not s.second_look or share >= SECOND_LOOK_SHARE)
             )
             drop_later = n_late = None
             if i in later:  # the later held-out samples' drop, fitted on the earlier training ones
@@ -502,15 +487,15 @@ class _Loop:
                 tests = tests and drop_later > need
             ok = tests and share >= share_needed
             refit = Refit(
-                name=s["name"], rmse_held_out_mm=plain_new, rmse_train_mm=rmse(r_new[train]),
+                name=s.name, rmse_held_out_mm=plain_new, rmse_train_mm=rmse(r_new[train]),
                 share_held_out=share, share_needed=share_needed, share_train=share_train,
                 sse_drop=drop, sse_drop_train=drop_train, sse_drop_later=drop_later, n_later=n_late,
                 needed=need, significant=bool(ok), short_of_share=bool(tests and not ok),
-                theta=th_new, err=err_new, score=s["score"],
+                theta=th_new, err=err_new, score=s.score,
             )  # fmt: skip
             tried.append(refit)
             self.say(
-                f"  refit {s['name']}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
+                f"  refit {s.name}: held-out {plain_new:.4f} mm (drop {drop:.1f}, needed {need:.1f})"
                 f"{' significant' if ok else ' short of the share' if tests else ''}"
             )
         return tried
@@ -925,6 +910,15 @@ def calibrate(
         ):
             st, end = cx.joint_look(st, end)  # the joint look (step 4)
         return _result(cx, pp, start, st, end, holdout, t0)
+
+
+def _screened(s: Score, rmse_mm: float, drop: float, alpha: float) -> Score:
+    """``s`` with its short refit's held-out RMSE and SSE ``drop``: it goes no further where the drop
+    is under a quarter of what the full refit's test needs (``_Loop.screen``)."""
+    needed = 0.25 * chi2_quantile(alpha, max(s.dof, 1))
+    return dataclasses.replace(
+        s, screened_rmse_mm=rmse_mm, screened_drop=drop, screened_needed=needed, screened_out=bool(drop < needed)
+    )
 
 
 def _share_needed(min_excess: float, err: float, floor: float) -> float:

@@ -12,6 +12,41 @@ import numpy as np
 
 
 @dataclasses.dataclass(frozen=True)
+class Score:
+    """A candidate's score test in a round (the loop's docstring, step 2), and its short refit where
+    the round screened it (step 3)."""
+
+    round: int
+    name: str
+    score: float  # z-value (0 where not scored)
+    dof: int
+    explained_rmse_mm: float
+    not_scored: str | None = None  # why it was not scored
+    second_look: bool = False  # a candidate of the round's second look
+    #: the short refit: its held-out RMSE, the held-out sum of squares' drop (in units of the
+    #: residual's variance), the drop it needed to go on, and whether it went no further
+    screened_rmse_mm: float | None = None
+    screened_drop: float | None = None
+    screened_needed: float | None = None
+    screened_out: bool | None = None
+
+    def to_dict(self) -> dict:
+        out = {k: getattr(self, k) for k in ("round", "name", "score", "dof", "explained_rmse_mm")}
+        if self.not_scored is not None:
+            out["not_scored"] = self.not_scored
+        if self.second_look:
+            out["second_look"] = True
+        if self.screened_rmse_mm is not None:
+            out.update(
+                screened_rmse_mm=self.screened_rmse_mm,
+                screened_drop=self.screened_drop,
+                screened_needed=self.screened_needed,
+                screened_out=self.screened_out,
+            )
+        return out
+
+
+@dataclasses.dataclass(frozen=True)
 class Refit:
     """A candidate's full refit in a round, and its tests (the loop's docstring, step 3)."""
 
