@@ -48,12 +48,12 @@ print("SECONDS", time.perf_counter() - t0, "RC", rc, flush=True)
 """
 
 
-def run(code_root: Path, args: list[str], cache: str | None = None) -> dict:
+def run(args: list[str], cache: str | None = None) -> dict:
     env = dict(os.environ, JAX_LOG_COMPILES="1", PYTHONWARNINGS="ignore", TENSION_ZONES_CACHE=cache or "0")
     env.pop("JAX_COMPILATION_CACHE_DIR", None)
     t0 = time.perf_counter()
     r = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(code_root), *args],
+        [sys.executable, "-c", _CHILD, str(ROOT), *args],
         capture_output=True,
         text=True,
         env=env,
@@ -126,7 +126,7 @@ def main(argv=None):
                 extra = (["--force"] if cache_state == "filled" else []) + (
                     ["--workers", "0"] if workers == "0" else []
                 )
-                r = run(ROOT, cli + extra, c)
+                r = run(cli + extra, c)
                 r.update(case=name, cache=cache_state, workers=workers, load=load())
                 print(json.dumps(r), flush=True)
                 res["rows"].append(r)

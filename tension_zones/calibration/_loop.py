@@ -447,7 +447,8 @@ class _Loop:
             # every candidate screened out there has a higher held-out error after its short refit
             # than without it
             screened = [_screened(s, e, (err**2 - e**2) * m / unit, alpha) for s, e in zip(significant, done)]
-            scores = [next((s for s in screened if s.name == c.name), c) for c in scores]
+            by_name = {s.name: s for s in screened}
+            scores = [by_name.get(c.name, c) for c in scores]
             ranked = sorted(((e, s) for s, e in zip(screened, done) if not s.screened_out), key=lambda p: p[0])
             significant = [s for _, s in ranked]
         return scores, significant
