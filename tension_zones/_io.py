@@ -11,6 +11,7 @@ two processes from writing one folder at once.
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import math
 import os
@@ -18,6 +19,13 @@ import shutil
 import socket
 import tempfile
 from pathlib import Path
+
+#: The name's start of :func:`staged_folder`'s hidden stage.
+STAGE_PREFIX = ".partial-"
+
+#: This process's hidden temporaries being written: :func:`remove_temporaries` removes them where a
+#: command is ended without unwinding (Ctrl-C inside a compiled program).
+_IN_FLIGHT: set[Path] = set()
 
 
 def _umask() -> int:
@@ -28,43 +36,83 @@ def _umask() -> int:
 
 @contextlib.contextmanager
 def atomic_path(path):
-    """``with atomic_path(p) as tmp: write(tmp)``: ``p`` appears, complete, when the block ends."""
+    """``with atomic_path(p) as tmp: write(tmp)``: ``p`` appears, complete, when the block ends. The
+    temporary ``.STEM.PID-HOST-*SUFFIX`` of a killed process is removed by the next write of ``p``."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    start = f".{path.stem}."
+    _remove_stale(path.parent, start, path.suffix)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=start + _owner(os.getpid()), suffix=path.suffix)
     os.close(fd)
     try:
-        yield Path(tmp)
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would make outputs private
-        os.replace(tmp, path)
+        with _in_flight(Path(tmp)):
+            yield Path(tmp)
+            os.chmod(tmp, 0o666 & ~_umask())  # mkstemp's 0600 would make outputs private
+            os.replace(tmp, path)
     except OSError as e:  # a full disk, say: name the file the user asked for, not the hidden one
         if e.filename in (None, tmp):
             raise OSError(e.errno, e.strerror or str(e), str(path)) from e
         raise
-    finally:
-        with contextlib.suppress(FileNotFoundError):
-            os.unlink(tmp)
 
 
 @contextlib.contextmanager
 def staged_folder(out, last=()):
     """``with staged_folder(folder) as stage: write files into stage``: the files appear in ``folder``
     (created if need be) when the block ends, ``last`` (the names that say the output is finished)
-    after the others; on an error or interrupt none do, and the hidden ``.partial-*`` stage is removed
-    (one left by a killed process is hidden: nothing that looks finished, nothing a rerun refuses)."""
+    after the others; on an error or interrupt none do, and the hidden ``.partial-PID-HOST-*`` stage
+    is removed (one left by a killed process: by the next run in ``folder``)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(dir=out, prefix=".partial-"))
+    _remove_stale(out, STAGE_PREFIX)
+    stage = Path(tempfile.mkdtemp(dir=out, prefix=STAGE_PREFIX + _owner(os.getpid())))
     try:
-        yield stage
-        names = sorted(p.name for p in stage.iterdir())
-        for name in [n for n in names if n not in last] + [n for n in last if n in names]:
-            os.replace(stage / name, out / name)
+        with _in_flight(stage):
+            yield stage
+            names = sorted(p.name for p in stage.iterdir())
+            for name in [n for n in names if n not in last] + [n for n in last if n in names]:
+                os.replace(stage / name, out / name)
     except OSError as e:  # name the output the user asked for, not its place in the stage
         if isinstance(e.filename, str) and Path(e.filename).parent == stage:
             raise OSError(e.errno, e.strerror or str(e), str(out / Path(e.filename).name)) from e
         raise
+
+
+def _owner(pid: int) -> str:
+    """The part of a temporary's name that says whose it is: ``PID-HOST-``."""
+    return f"{pid}-{socket.gethostname()}-"
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+
+
+@contextlib.contextmanager
+def _in_flight(tmp: Path):
+    """Register ``tmp`` while the block runs; it is removed when the block ends, however it ends."""
+    _IN_FLIGHT.add(tmp)
+    try:
+        yield
     finally:
-        shutil.rmtree(stage, ignore_errors=True)
+        _IN_FLIGHT.discard(tmp)
+        _remove(tmp)
+
+
+def _remove_stale(folder: Path, start: str, end: str = "") -> None:
+    """Remove the temporaries ``start + PID-HOST- ... + end`` in ``folder`` whose process, on this host,
+    has gone (another host's cannot be checked from here: they stay, as :func:`folder_lock`'s do)."""
+    for p in folder.glob(glob.escape(start) + "*" + glob.escape(end)):
+        pid = p.name[len(start) :].split("-")[0]
+        if pid.isdigit() and p.name.startswith(start + _owner(int(pid))) and not _alive(int(pid)):
+            _remove(p)
+
+
+def remove_temporaries() -> None:
+    """Remove this process's temporaries still being written (before it ends without unwinding)."""
+    for tmp in list(_IN_FLIGHT):
+        _remove(tmp)
 
 
 #: The lock file :func:`folder_lock` makes in a folder.

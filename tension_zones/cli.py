@@ -1038,13 +1038,16 @@ INTERRUPT_GRACE_S = 2.0
 
 
 def _end_interrupted() -> None:
-    """The end of a command that did not stop by itself after Ctrl-C: its worker processes killed,
-    one line, exit status 130, without unwinding (staged outputs stay hidden: ``.partial-*``,
-    ``.NAME.*``)."""
+    """The end of a command that did not stop by itself after Ctrl-C: its worker processes killed, its
+    hidden temporaries removed (the outputs being written: nothing is left that looks finished or that
+    a rerun trips on), one line, exit status 130, without unwinding."""
     import multiprocessing
+
+    from ._io import remove_temporaries
 
     for p in multiprocessing.active_children():
         p.kill()
+    remove_temporaries()
     with contextlib.suppress(OSError):
         os.write(2, b"tension-zones: interrupted\n")
     os._exit(130)

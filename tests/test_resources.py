@@ -195,6 +195,45 @@ def test_explore_locks_its_folder_and_a_stale_lock_does_not_block(tmp_path, caps
     assert (out / "table.npz").exists() and not (out / _io.LOCK_NAME).exists()
 
 
+def _dead_pid() -> int:
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    return dead.pid
+
+
+def test_temporaries_of_a_killed_process_go_with_the_next_write_and_others_stay(tmp_path):
+    """A killed writer's hidden file and stage (its process gone, this host) are removed by the next
+    write into that folder; a live process's, another host's and unrelated hidden files stay."""
+    host = os.uname().nodename
+    left = [tmp_path / f".r.{_dead_pid()}-{host}-x1.json", tmp_path / f"{_io.STAGE_PREFIX}{_dead_pid()}-{host}-x2"]
+    kept = [
+        tmp_path / f".r.1-{host}-x3.json",  # pid 1: alive
+        tmp_path / f".r.{_dead_pid()}-elsewhere-x4.json",  # another host's
+        tmp_path / f".q.{_dead_pid()}-{host}-x5.json",  # another file's
+        tmp_path / ".hidden",
+    ]
+    left[1].mkdir()
+    for p in [left[0], *kept]:
+        p.write_text("{}")
+    _io.write_json(tmp_path / "r.json", {"a": 1})
+    assert not left[0].exists() and left[1].exists()  # a file's write clears its own temporaries only
+    with _io.staged_folder(tmp_path) as stage:
+        (stage / "s.txt").write_text("x")
+    assert not left[1].exists() and all(p.exists() for p in kept)
+    assert sorted(p.name for p in tmp_path.iterdir() if not p.name.startswith(".")) == ["r.json", "s.txt"]
+
+
+def test_a_command_ended_without_unwinding_removes_what_it_was_writing(tmp_path):
+    """What the Ctrl-C watchdog calls before it ends the process inside a block that never ends: the
+    stage and the file being written go; nothing appears."""
+    blocks = [_io.staged_folder(tmp_path / "o"), _io.atomic_path(tmp_path / "f.npz")]
+    stage, tmp = (b.__enter__() for b in blocks)
+    tmp.write_bytes(b"half")
+    (stage / "report.json").write_text("{")
+    _io.remove_temporaries()
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["o"]
+
+
 def test_a_coordinator_that_does_not_answer_is_one_line(tmp_path, capsys):
     space = tmp_path / "space.json"
     space.write_text(json.dumps(SPACE))
