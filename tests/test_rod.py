@@ -1,6 +1,8 @@
 """The rod model: each segment solved as constant-curvature pieces in the one equilibrium, checked
 against the independent Kirchhoff-rod solver of ``tests/reference_rod.py`` (SciPy's solve_bvp)."""
 
+from functools import partial
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -16,20 +18,24 @@ SEG = tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)
 Q = jnp.array([-3.0, 0.5, 0.5])
 
 
+@partial(jax.jit, static_argnums=1)
+def _solution(phys, st, q, f):
+    B = E.solve(phys, st, q, f)
+    p, _ = chain_tip(E.piece_lengths(phys, st), B)
+    sm = E._Sample(phys, st, q, f, jnp.zeros_like(q), jnp.asarray(True))
+    return p, B, sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0)
+
+
 def solved(robot, q, load, m, freedom=None):
-    """Tip position, piece bending vectors and the wires' tensions (N) of the package's solution."""
+    """Tip position, piece bending vectors and the wires' tensions (N) of the package's solution (one
+    program per structure: eagerly, every operation would compile a program of its own)."""
     phys = robot.params()
     phys["gravity"] = jnp.asarray(load.gravity, float)
     if freedom is not None:
         phys["curvature_freedom"] = jnp.asarray(freedom, float)
     st = Structure(robot.n_wires_per_segment, m)
-    B = E.solve(phys, st, q, load.tip_force)
-    p, _ = chain_tip(E.piece_lengths(phys, st), B)
-    sm = E._Sample(
-        phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.zeros(robot.n_wires), jnp.asarray(True)
-    )
-    tau = np.asarray(sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0))
-    return np.asarray(p), np.asarray(B), tau
+    out = _solution(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float))
+    return tuple(np.asarray(a) for a in out)
 
 
 def test_tendons_alone_give_constant_curvature_exactly():
@@ -98,21 +104,31 @@ def test_two_segments_under_weight_match_the_rod():
     assert np.linalg.norm(p - ref.tip_position) < 0.05 < np.linalg.norm(p1 - ref.tip_position)
 
 
-def _with_friction(robot, q, mu, d, m, load=None):
+@partial(jax.jit, static_argnums=(1, 6))
+def _friction_solution(phys, st, q, f, d, loaded, jacobians):
+    B = E.solve(phys, st, q, f, d)
+    x = B.reshape(-1)
+    sm = E._Sample(phys, st, q, f, d, loaded)
+    out = {"p": chain_tip(E.piece_lengths(phys, st), B)[0], "force": sm.force(x)}
+    out["tension"] = sm.k * jnp.maximum(sm.stretch(x), 0.0)
+    if jacobians:
+        out.update(force_jacobian=sm.force_jacobian(x), force_jacobian_ad=jax.jacfwd(sm.force)(x))
+    return out
+
+
+def _with_friction(robot, q, mu, d, m, load=None, jacobians=False):
+    """The equilibrium with friction along the routing (``d`` the wires' directions of motion): its tip,
+    the non-conservative force and the tensions there, and with ``jacobians`` the force's Jacobian in
+    closed form and by forward mode; one program per structure."""
     load = Load.none() if load is None else load
     phys = robot.params()
     phys.update(friction=jnp.asarray(mu, float), gravity=jnp.asarray(load.gravity, float))
     st = Structure(robot.n_wires_per_segment, m)
-    B = E.solve(phys, st, q, load.tip_force, jnp.asarray(d, float))
-    sm = E._Sample(
-        phys,
-        st,
-        jnp.asarray(q, float),
-        jnp.asarray(load.tip_force, float),
-        jnp.asarray(d, float),
-        jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity))),
+    loaded = jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity)))
+    out = _friction_solution(
+        phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.asarray(d, float), loaded, jacobians
     )
-    return np.asarray(chain_tip(E.piece_lengths(phys, st), B)[0]), B.reshape(-1), sm
+    return {k: np.asarray(v) for k, v in out.items()}
 
 
 @pytest.mark.parametrize("d", [-1.0, 1.0], ids=["pulled", "released"])
@@ -125,9 +141,9 @@ def test_friction_decays_the_tension_over_the_disks_as_the_capstan_rod(d):
     q, mu = jnp.array([-3.0, 6.0, 6.0]), (0.2, 0.8)
     errs = []
     for m in (1, 4, 16):
-        p, x, sm = _with_friction(robot, q, mu, [d, 0.0, 0.0], m)
-        np.testing.assert_allclose(sm.force(x), 0.0, atol=1e-9)  # the root of the non-conservative force
-        tau = float(sm.k[0] * jnp.maximum(sm.stretch(x), 0.0)[0])
+        sol = _with_friction(robot, q, mu, [d, 0.0, 0.0], m)
+        np.testing.assert_allclose(sol["force"], 0.0, atol=1e-9)  # the root of the non-conservative force
+        p, tau = sol["p"], float(sol["tension"][0])
         c = 4.5 * tau * np.exp(d * mu[0]) / 2454.0
         s = np.linspace(0.0, 60.0, 20001)
         th = -d * np.log1p(-d * mu[1] * c * s) / mu[1]
@@ -164,9 +180,9 @@ def test_friction_force_jacobian_is_exact_with_loads_and_segments():
     q = jnp.array([-1.5, 0.4, 0.4, 0.3, -1.0, 0.3, 0.3])
     d = np.sign(np.asarray(q))
     load = Load(jnp.array([0.05, -0.1, 0.0]), jnp.array([0.0, 0.002, -0.003]))
-    _, x, sm = _with_friction(robot, q, (0.15, 0.5), d, 3, load)
-    np.testing.assert_allclose(sm.force(x), 0.0, atol=1e-8)
-    np.testing.assert_allclose(sm.force_jacobian(x), jax.jacfwd(sm.force)(x), rtol=1e-6, atol=1e-6)
+    sol = _with_friction(robot, q, (0.15, 0.5), d, 3, load, jacobians=True)
+    np.testing.assert_allclose(sol["force"], 0.0, atol=1e-8)
+    np.testing.assert_allclose(sol["force_jacobian"], sol["force_jacobian_ad"], rtol=1e-6, atol=1e-6)
 
     jac = jax.jit(jax.jacfwd(lambda mu, q: chain_tip(*_tip_args(robot, mu, q, d))[0], argnums=(0, 1)))
     for qq in (q, jnp.zeros(7)):
@@ -195,7 +211,7 @@ def test_curvature_freedom_interpolates_with_a_first_order_derivative_at_zero():
         st = Structure((3,), 4)
         return chain_tip(E.piece_lengths(phys, st), E.solve(phys, st, Q, load.tip_force))[0]
 
-    d0 = np.asarray(jax.jacfwd(tip)(jnp.zeros(1)))[:, 0]
+    d0 = np.asarray(jax.jit(jax.jacfwd(tip))(jnp.zeros(1)))[:, 0]
     # the first-order variation points from constant curvature toward the rod
     assert np.dot(d0, p_rod - p_cc) > 0.5 * np.linalg.norm(d0) * dev
 
