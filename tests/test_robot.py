@@ -279,10 +279,10 @@ def test_loaded_single_segment_equilibrium_is_optimal():
 
 def _check_optimal(rob, q, load):
     B = EQ(rob, q, load)
-    g = jax.grad(lambda b: ms.energy(rob, b, q, load))(B)
+    g = jax.jit(jax.grad(ms.energy, argnums=1))(rob, B, q, load)
     np.testing.assert_allclose(g, 0.0, atol=1e-9)
-    tau = np.asarray(ms.wire_tensions(rob, B, q))
-    s = np.asarray(ms.wire_stretch(rob, B, q))
+    tau = np.asarray(jax.jit(ms.wire_tensions)(rob, B, q))
+    s = np.asarray(jax.jit(ms.wire_stretch)(rob, B, q))
     assert np.all(tau >= 0)
     np.testing.assert_array_equal(tau[s <= 0], 0.0)
     assert 0 < np.sum(tau > 0) < rob.n_wires  # some wires pull, some are slack
@@ -367,17 +367,17 @@ def test_load_jacobians_and_chain_tip_derivative_are_exact(x):
     f, g = jnp.asarray([0.3, -0.2, 0.5]), jnp.asarray([1e-3, 2e-3, -4e-3])
     x = jnp.asarray(x)
     np.testing.assert_allclose(
-        E.load_gradient(L, x, f, g), jax.grad(E.load_potential, argnums=1)(L, x, f, g), atol=1e-10
+        jax.jit(E.load_gradient)(L, x, f, g), jax.jit(jax.grad(E.load_potential, argnums=1))(L, x, f, g), atol=1e-10
     )
     # the custom derivative of the tip against forward mode through the plain chain, in B and L
     plain = lambda LL, xx: chain_poses(LL, xx.reshape(3, 2))[0][-1]
     fast = lambda LL, xx: chain_tip(LL, xx.reshape(3, 2))[0]
     for arg in (0, 1):
         np.testing.assert_allclose(
-            jax.jacfwd(fast, argnums=arg)(L, x), jax.jacfwd(plain, argnums=arg)(L, x), atol=1e-10
+            jax.jit(jax.jacfwd(fast, argnums=arg))(L, x), jax.jit(jax.jacfwd(plain, argnums=arg))(L, x), atol=1e-10
         )
-    Rp = jax.jacfwd(lambda xx: chain_poses(L, xx.reshape(3, 2))[1][-1])(x)
-    Rf = jax.jacfwd(lambda xx: chain_tip(L, xx.reshape(3, 2))[1])(x)
+    Rp = jax.jit(jax.jacfwd(lambda xx: chain_poses(L, xx.reshape(3, 2))[1][-1]))(x)
+    Rf = jax.jit(jax.jacfwd(lambda xx: chain_tip(L, xx.reshape(3, 2))[1]))(x)
     np.testing.assert_allclose(Rf, Rp, atol=1e-10)
 
 
@@ -397,9 +397,9 @@ def test_long_chains_as_a_scan_equal_the_unrolled_chain(monkeypatch):
         return ps, Rs, R.chain_J_xB(L, B), *tip
 
     monkeypatch.setattr(R, "CHAIN_UNROLL_MAX", 0)
-    scanned = everything()
+    scanned = jax.jit(everything)()  # (a jit of its own each: the chain's form is fixed at tracing)
     monkeypatch.setattr(R, "CHAIN_UNROLL_MAX", 100)
-    for a, b in zip(scanned, everything()):
+    for a, b in zip(scanned, jax.jit(everything)()):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
 
 
@@ -529,7 +529,7 @@ def test_clearance_at_the_straight_pose_is_finite_with_finite_gradients():
     q, c = jnp.zeros(rob.n_wires), jnp.asarray([0.1, 0.0])
     B = jax.jit(_clearance_solve)(rob, q, c)
     np.testing.assert_allclose(B, 0.0, atol=1e-12)
-    Jc, Jq = jax.jacfwd(lambda c, q: rob.tip_pose(_clearance_solve(rob, q, c))[0], argnums=(0, 1))(c, q)
+    Jc, Jq = jax.jit(jax.jacfwd(lambda c, q: rob.tip_pose(_clearance_solve(rob, q, c))[0], argnums=(0, 1)))(c, q)
     assert np.all(np.isfinite(Jc)) and np.all(np.isfinite(Jq))
 
 
