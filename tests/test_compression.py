@@ -126,11 +126,12 @@ def test_derivatives_in_the_compliance_at_zero_and_beyond():
     rob = robot()
     q = commands(rob, np.random.default_rng(3))
 
+    @jax.jit
     def f(a):
         return tip(phys_of(rob, a), rob.structure, q)
 
     # at zero (the score test's null): one-sided second-order differences
-    J = np.asarray(jax.jacfwd(f)(jnp.zeros(3)))
+    J = np.asarray(jax.jit(jax.jacfwd(f))(jnp.zeros(3)))
     h = 1e-6
     fd = np.stack(
         [
@@ -142,7 +143,7 @@ def test_derivatives_in_the_compliance_at_zero_and_beyond():
     np.testing.assert_allclose(J, fd, rtol=1e-4, atol=1e-3)
     assert np.abs(J).max() > 10.0  # mm per (mm/N): the effect is seen at zero
     a0 = jnp.asarray([2e-3, 4e-3, 1e-3])
-    J = np.asarray(jax.jacfwd(f)(a0))
+    J = np.asarray(jax.jit(jax.jacfwd(f))(a0))
     fd = np.stack([(f(a0.at[i].add(1e-7)) - f(a0.at[i].add(-1e-7))) / 2e-7 for i in range(3)], axis=1)
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-5)
 
@@ -151,14 +152,9 @@ def test_derivatives_in_the_commands_with_compression():
     rob = robot()
     q0 = commands(rob, np.random.default_rng(4))
     phys = phys_of(rob, [3e-3, 2e-3, 1e-3])
-    J = np.asarray(jax.jacfwd(lambda q: tip(phys, rob.structure, q))(q0))
-    fd = np.stack(
-        [
-            (tip(phys, rob.structure, q0.at[i].add(1e-6)) - tip(phys, rob.structure, q0.at[i].add(-1e-6))) / 2e-6
-            for i in range(rob.n_wires)
-        ],
-        axis=1,
-    )
+    f = jax.jit(lambda q: tip(phys, rob.structure, q))
+    J = np.asarray(jax.jit(jax.jacfwd(f))(q0))
+    fd = np.stack([(f(q0.at[i].add(1e-6)) - f(q0.at[i].add(-1e-6))) / 2e-6 for i in range(rob.n_wires)], axis=1)
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)
 
 
@@ -199,12 +195,12 @@ def test_with_friction_and_clearance_the_solve_is_the_root_of_the_force_and_diff
     _, B = tip_f(a0, q0)
     sm = eq._Sample(phys, rob.structure, q0, jnp.zeros(3), direction, jnp.asarray(False))
     assert float(jnp.max(jnp.abs(sm.force(B.reshape(-1))))) < 1e-9
-    J = np.asarray(jax.jacfwd(lambda a: tip_f(a, q0)[0])(a0))
+    J = np.asarray(jax.jit(jax.jacfwd(lambda a: tip_f(a, q0)[0]))(a0))
     fd = np.stack(
         [(tip_f(a0.at[i].add(1e-7), q0)[0] - tip_f(a0.at[i].add(-1e-7), q0)[0]) / 2e-7 for i in range(3)], axis=1
     )
     np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-5)
-    J = np.asarray(jax.jacfwd(lambda q: tip_f(a0, q)[0])(q0))
+    J = np.asarray(jax.jit(jax.jacfwd(lambda q: tip_f(a0, q)[0]))(q0))
     fd = np.stack(
         [(tip_f(a0, q0.at[i].add(1e-6))[0] - tip_f(a0, q0.at[i].add(-1e-6))[0]) / 2e-6 for i in range(rob.n_wires)],
         axis=1,

@@ -531,7 +531,7 @@ def test_a_robot_s_deflection_term_is_its_worst_reduced_deflection_under_the_tip
     sc = parse_scenario({**TWO, "load_N": [0.5, 0.2, -0.3], "weights": weights})
     robot = with_numbers(opt._base_robot(sc, (4, 3)), pitch_radius=[3.0, 2.0], preload=[0.0, 0.5])
     row = opt.evaluate_design(sc, robot)
-    c = jax.vmap(lambda B: tz.config_compliance(robot, B, sc.load))(sc.configs)
+    c = jax.jit(jax.vmap(lambda B: tz.config_compliance(robot, B, sc.load)))(sc.configs)
     ok = np.asarray(c["feasible"]) & np.isfinite(np.asarray(c["deflection_mm_reduced"]))
     worst = np.max(np.where(ok, c["deflection_mm_reduced"], 0.0))
     assert row["worst_deflection_mm"] == pytest.approx(worst, rel=1e-12) and worst > 0

@@ -357,7 +357,7 @@ def test_weight_moment_is_the_integral_of_the_arc(b):
     s = 0.5 * L * (x + 1.0)
     pts = np.stack([np.asarray(K.segment_pose(si, b * si / L)[0]) for si in s])
     np.testing.assert_allclose(K.segment_weight_moment(L, jnp.asarray(b)), 0.5 * L * w @ pts, rtol=1e-12, atol=1e-9)
-    J = jax.jacfwd(lambda bb: K.segment_weight_moment(L, bb))(jnp.asarray(b))
+    J = jax.jit(jax.jacfwd(lambda bb: K.segment_weight_moment(L, bb)))(jnp.asarray(b))
     np.testing.assert_allclose(K.segment_weight_moment_jacobian(L, jnp.asarray(b)), J, atol=1e-9)
 
 
@@ -450,7 +450,7 @@ def test_friction_equilibrium_is_the_root_and_its_derivatives_are_exact():
     np.testing.assert_allclose(F, 0.0, atol=1e-9)
     assert np.abs(np.asarray(B) - np.asarray(EQ(rob, q, None))).max() > 1e-3  # friction matters
     tip = jax.jit(lambda m: rob.tip_pose(_solve(rob, q, m, d))[0])
-    J = jax.jacfwd(tip)(mu)
+    J = jax.jit(jax.jacfwd(tip))(mu)
     h = 1e-6
     for i in range(2):
         e = jnp.zeros(2).at[i].set(h)
@@ -490,7 +490,7 @@ def test_clearance_equilibrium_matches_an_independent_root_and_its_derivatives_a
     np.testing.assert_allclose(B, ref, atol=1e-9)
     assert np.abs(B - np.asarray(EQ(rob, q, None)).reshape(-1)).max() > 1e-3  # the clearance matters
     tip = jax.jit(lambda c, q: rob.tip_pose(_clearance_solve(rob, q, c))[0])
-    Jc, Jq = jax.jacfwd(tip, argnums=(0, 1))(c, q)
+    Jc, Jq = jax.jit(jax.jacfwd(tip, argnums=(0, 1)))(c, q)
     h = 1e-6
     for i in range(2):
         e = jnp.zeros(2).at[i].set(h)
@@ -514,7 +514,7 @@ def test_clearance_with_friction_in_the_rod_is_the_root_and_its_derivatives_are_
     F = E._Sample(phys, st, q, jnp.zeros(3), d, jnp.asarray(False)).force(B.reshape(-1))
     np.testing.assert_allclose(F, 0.0, atol=1e-9)
     tip = jax.jit(lambda c: chain_tip(E.piece_lengths(phys, st), _clearance_solve(rob, q, c, mu, d, 3))[0])
-    J = jax.jacfwd(tip)(c)
+    J = jax.jit(jax.jacfwd(tip))(c)
     h = 1e-6
     for i in range(2):
         e = jnp.zeros(2).at[i].set(h)
