@@ -297,7 +297,7 @@ def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(tmp_path, monk
     writes the report without --force."""
     from tension_zones.calibration import _report
 
-    csv, dj = write_set(tmp_path, "nom", Truth(), 120, seed=2)
+    csv, dj = write_set(tmp_path, "nom", Truth(), 240, seed=2)
     out = tmp_path / "out"
     argv = ["calibrate", str(csv), "--design", str(dj), "--out", str(out), "--quiet"]
 

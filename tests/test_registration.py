@@ -60,7 +60,7 @@ def tracker_set(tmp_path_factory):
     """A two-segment robot with backlash, in a tracker frame (the generator's), training and validation."""
     folder = tmp_path_factory.mktemp("reg")
     train, val, design = write_robot_set(
-        folder, "bl", RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)), seed=3, steps=8
+        folder, "bl", RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)), seed=3, steps=10
     )
     robot = tz.Robot.from_json(design)
     tr = read_opencr(train, n_wires=robot.n_wires)
