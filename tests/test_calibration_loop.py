@@ -92,7 +92,8 @@ def test_the_final_refit_takes_every_sample_of_the_data_file_and_nothing_of_the_
     # running the loop's independent fits (calibration/_fits.py) changes nothing: every decision,
     # error and parameter of the report is the same, bit for bit
     moved = calibrate(data, design, validate=dataclasses.replace(val, p=val.p + 5.0), workers=1)
-    assert [e["name"] for e in moved.effects] == ["backlash"]
+    assert [e.name for e in moved.effects] == ["backlash"]
+    assert [e.to_dict() for e in res.effects] == rep["effects"] and res.effects[0].params_std is not None
     assert moved.theta_after.tolist() == res.theta_after.tolist()
     assert moved.rmse["validate"] > res.rmse["validate"] + 3.0
     assert screening(rep) > 0  # (the round's short refits ran, on both processes)
@@ -311,3 +312,18 @@ def test_an_interrupted_report_leaves_nothing_and_the_rerun_works(tmp_path, monk
     assert list(out.iterdir()) == []
     assert main(argv) == 0
     assert {"report.json", "report.md"} <= {p.name for p in out.iterdir()}
+
+
+def test_the_effects_kept_are_records_and_reading_them_as_dicts_is_deprecated():
+    """``Result.effects`` holds ``Added`` records (``to_dict``: report.json's form, keys in its order);
+    ``effect["name"]``, as when they were dicts, still answers, with a DeprecationWarning."""
+    from tension_zones.calibration._rounds import Added
+
+    e = Added("backlash", 0.09, 7.5)
+    assert list(e.to_dict()) == ["name", "rmse_after_mm", "score"]
+    done = dataclasses.replace(e, params={"play_1_mm": 0.3}, params_std={"play_1_mm": 0.01})
+    assert list(done.to_dict()) == ["name", "rmse_after_mm", "score", "params", "params_std"]
+    with pytest.warns(DeprecationWarning, match=r"read effect.name, not effect\['name'\]"):
+        assert done["name"] == "backlash"
+    with pytest.warns(DeprecationWarning), pytest.raises(KeyError):
+        e["params"]  # (not there before the final refit, as the dict had no such key)

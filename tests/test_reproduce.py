@@ -37,7 +37,7 @@ def test_readme_example_runs_from_an_empty_folder(tmp_path):
     code = text.split("## Ten lines of Python", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     assert 8 <= len(code.strip().splitlines()) <= 12
     r = subprocess.run(
-        [sys.executable, "-c", code + "\nassert res.effects[0]['name'] == 'backlash'"],
+        [sys.executable, "-c", code + "\nassert res.effects[0].name == 'backlash'"],
         cwd=tmp_path,
         capture_output=True,
         text=True,

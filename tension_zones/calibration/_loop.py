@@ -78,7 +78,7 @@ from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
 from ._register import GlobalRegistration, global_registration, kabsch, rotation_vector
-from ._rounds import BranchEnd, JointLook, LookAhead, Refit, Removal, Round, Score
+from ._rounds import Added, BranchEnd, JointLook, LookAhead, Refit, Removal, Round, Score
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -128,7 +128,7 @@ class Result:
     std_after: np.ndarray
     nominal: list
     active: list
-    effects: list
+    effects: list[Added]
     candidates: list
     rounds: list[Round]
     steps: list
@@ -177,7 +177,7 @@ class Result:
             "noise_floor_mm": self.noise["floor_mm"],
             "noise": self.noise,
             "nominal_parameters": list(self.nominal),
-            "effects": self.effects,
+            "effects": [e.to_dict() for e in self.effects],
             "candidates": [c.to_dict() for c in self.candidates],
             "rounds": [rd.to_dict() for rd in self.rounds],
             "steps": self.steps,
@@ -220,7 +220,7 @@ class _Branch:
     err: float  # the held-out error the decisions use
     plain: float  # the held-out RMSE
     active: list
-    effects: list = dataclasses.field(default_factory=list)
+    effects: list[Added] = dataclasses.field(default_factory=list)
     candidates: list = dataclasses.field(default_factory=list)
     rounds: list[Round] = dataclasses.field(default_factory=list)
     models: list = dataclasses.field(default_factory=list)  # every accepted model, for the validation steps
@@ -508,27 +508,22 @@ class _Loop:
         if accepted is not None:
             st.theta, st.err, st.plain = accepted.theta, accepted.err, accepted.rmse_held_out_mm
             st.active.append(accepted.name)
-            st.effects.append(
-                {"name": accepted.name, "rmse_after_mm": accepted.rmse_held_out_mm, "score": accepted.score}
-            )
+            st.effects.append(Added(accepted.name, accepted.rmse_held_out_mm, accepted.score))
             self.say(f"  kept {accepted.name}")
             # backward step: an earlier effect that only stood in for the one just added goes
             # (the refits without each earlier effect run at once; the first that passes is taken)
             sl = self.sl
-            earlier = [e for e in st.effects if e["name"] != accepted.name]
-            jobs = [
-                (_reset(st.theta, sl[e["name"]], self.pb.null), [a for a in st.active if a != e["name"]])
-                for e in earlier
-            ]
+            earlier = [e.name for e in st.effects if e.name != accepted.name]
+            jobs = [(_reset(st.theta, sl[e], self.pb.null), [a for a in st.active if a != e]) for e in earlier]
             for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, self.run.map("refit_held_only", jobs)):
                 rise = (err_wo**2 - st.err**2) * self.m / self.unit_of(st.err)
-                need = chi2_quantile(self.alpha, int(sl[e["name"]].stop - sl[e["name"]].start))
-                self.say(f"  without {e['name']}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
+                need = chi2_quantile(self.alpha, int(sl[e].stop - sl[e].start))
+                self.say(f"  without {e}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
                 if rise < need:
                     st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
-                    st.effects = [x for x in st.effects if x["name"] != e["name"]]
-                    removed.append(Removal(name=e["name"], rmse_held_out_mm=plain_wo, sse_rise=rise, needed=need))
-                    self.say(f"  removed {e['name']}")
+                    st.effects = [x for x in st.effects if x.name != e]
+                    removed.append(Removal(name=e, rmse_held_out_mm=plain_wo, sse_rise=rise, needed=need))
+                    self.say(f"  removed {e}")
                     break
             st.models.append((list(st.active), st.theta.copy()))
         name = None if accepted is None else accepted.name
@@ -790,9 +785,12 @@ def _result(cx: _Loop, pp: _Prepared, start: dict, st: _Branch, end: tuple, hold
     r_final, J_final = pb.jacobian(theta, active)
     free = pb.mask(active)
     std = parameter_std(J_final, r_final, free, w_all)
-    for e in effects:
-        e["params"] = pb.describe(theta, [e["name"]])[e["name"]]
-        e["params_std"] = pb.describe_std(theta, [e["name"]], std)[e["name"]]
+    effects = [
+        dataclasses.replace(
+            e, params=pb.describe(theta, [e.name])[e.name], params_std=pb.describe_std(theta, [e.name], std)[e.name]
+        )
+        for e in effects
+    ]
     corr = correlations(J_final, free, w_all, pb.labels(active))
     rmse_d = {
         "declared": rmse(start["r_decl"][held]),

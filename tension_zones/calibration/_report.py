@@ -58,7 +58,7 @@ def plot_residuals(res: Result, out_dir: Path) -> list[Path]:
         "after": _components(pb.residuals(res.theta_selected, res.active), feats),
     }
     # the effects added go on a line of their own: in the panels' titles a long list runs into its neighbours
-    added = textwrap.fill("after: " + (", ".join(e["name"] for e in res.effects) or "no effect added"), 150)
+    added = textwrap.fill("after: " + (", ".join(e.name for e in res.effects) or "no effect added"), 150)
     lim = 1.1 * max(np.percentile(np.abs(c[mask]), 99.5) for c in comps.values())
     xlabels = {
         "bending_direction": "bending direction (deg, base frame)",

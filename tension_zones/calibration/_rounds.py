@@ -7,6 +7,7 @@ report lists them, a field that does not apply left out.
 from __future__ import annotations
 
 import dataclasses
+import warnings
 
 import numpy as np
 
@@ -44,6 +45,37 @@ class Score:
                 screened_out=self.screened_out,
             )
         return out
+
+
+@dataclasses.dataclass(frozen=True)
+class Added:
+    """An effect the loop kept (``Result.effects``): the held-out RMSE once it was in and its score; in
+    the final result its parameters and their standard deviations (the refit on every sample,
+    :meth:`Problem.describe` form)."""
+
+    name: str
+    rmse_after_mm: float
+    score: float
+    params: dict | None = None
+    params_std: dict | None = None
+
+    def to_dict(self) -> dict:
+        out = {"name": self.name, "rmse_after_mm": self.rmse_after_mm, "score": self.score}
+        if self.params is not None:
+            out.update(params=self.params, params_std=self.params_std)
+        return out
+
+    def __getitem__(self, key: str):
+        """``effect["name"]``, as when effects were dicts: deprecated, read the attribute."""
+        warnings.warn(
+            f"Result.effects holds records: read effect.{key}, not effect[{key!r}] (indexing by key is "
+            "deprecated and will be removed)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+        if key not in self.to_dict():
+            raise KeyError(key)
+        return getattr(self, key)
 
 
 @dataclasses.dataclass(frozen=True)
