@@ -23,6 +23,10 @@ from pathlib import Path
 from typing import Any
 
 _SCHEDULER = "--xla_cpu_enable_concurrency_optimized_scheduler"
+#: The name of a thread that compiles a program ahead of its use (``calibration/_problem.py``,
+#: ``engine_ahead``): the command line ends its process without the interpreter's shutdown while one
+#: runs (``cli._exit``).
+COMPILE_THREAD = "tension-zones-compile"
 _FUSION = "xla_cpu_use_fusion_emitters"
 _LLVM_LEVEL = "xla_backend_optimization_level"
 

@@ -13,11 +13,15 @@ import sys
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import NoReturn
 
 import numpy as np
 
-# Only the standard library and NumPy at import: `tension-zones --help` and `CMD --help` never
-# import JAX (each command imports what it needs when it runs).
+from ._xla import COMPILE_THREAD
+
+# Only the standard library and NumPy at import (and ``_xla``, which imports no JAX):
+# `tension-zones --help` and `CMD --help` never import JAX (each command imports what it needs when
+# it runs).
 
 
 class CLIError(Exception):
@@ -1097,6 +1101,27 @@ def _interrupt_watchdog(grace: float = INTERRUPT_GRACE_S):
         w.close()
 
 
+def _exit(code: int) -> NoReturn:
+    """End the process with status ``code``. While a program compiles on a thread (a command
+    interrupted or failed mid-calibration leaves it: ``Runner.close`` does not wait for it), without
+    the interpreter's shutdown: a thread inside XLA's compiler when the interpreter finalises aborts
+    the process after the command's one line ("FATAL: exception not rethrown", status 134)."""
+    import threading
+
+    if any(t.name == COMPILE_THREAD and t.is_alive() for t in threading.enumerate()):
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(OSError, ValueError):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
+def run(argv=None) -> NoReturn:
+    """The ``tension-zones`` command: :func:`main` (which returns the exit status, for callers in
+    this process), then the process ends (:func:`_exit`)."""
+    _exit(main(argv))
+
+
 def main(argv=None) -> int:
     import warnings
 
@@ -1121,4 +1146,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    run()

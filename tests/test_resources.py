@@ -305,7 +305,7 @@ def _cli_env():
 #: its children, and Python then installs no KeyboardInterrupt handler.
 CLI_WITH_CTRL_C = (
     "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-    "from tension_zones.cli import main; sys.exit(main(sys.argv[1:]))"
+    "from tension_zones.cli import run; run(sys.argv[1:])"
 )
 
 
@@ -415,8 +415,6 @@ def test_ctrl_c_stops_a_calibration_and_the_rerun_reports(tmp_path, capsys):
         str(tz.example_path("synthetic/unknown_a_3w.csv")),
         "--design",
         str(tz.example_path("synthetic/unknown_a_3w.design.json")),
-        "--effects",
-        "backlash",
         "--out",
         str(out),
     ]

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._lsq import levenberg_marquardt
-from .._xla import classes_digest, fast_compile_options, stored_program
+from .._xla import COMPILE_THREAD, classes_digest, fast_compile_options, stored_program
 
 
 @dataclasses.dataclass(frozen=True)
@@ -196,7 +196,7 @@ def engine_ahead(spec, *args) -> threading.Thread | None:
             _PROGRAMS[key] = fn
             fut.set_result(fn)
 
-    t = threading.Thread(target=work, name="tension-zones-compile", daemon=True)
+    t = threading.Thread(target=work, name=COMPILE_THREAD, daemon=True)
     t.start()
     return t
 
