@@ -523,6 +523,29 @@ def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
     assert opt._run_starts._cache_size() == before
 
 
+def test_a_loaded_robot_s_new_numbers_do_not_recompile():
+    """With the deflection term on (a tip load): another load, weights, geometry, stiffness, preload
+    and step size run the program compiled for the first scenario."""
+    small = {"samples": 16, "optimizer": {"starts": 1, "steps": 3, "learning_rate": 0.1}}
+    opt.optimize(_two(**small), progress=False)
+    before = opt._run_starts._cache_size()
+    segments = [
+        {**TWO["segments"][0], "length_mm": 45.0, "backbone_EI_Nmm2": 3000.0, "wire_stiffness_N_per_mm": [70.0, 70.0]},
+        {**TWO["segments"][1], "n_wires": [4], "pitch_radius_mm": [1.5, 2.5], "preload_N": [0.5, 1.5]},
+    ]
+    other = {
+        **TWO,
+        **small,
+        "segments": segments,
+        "load_N": [0.2, -0.4, 0.3],
+        "weights": {"position_uncertainty": 0.5, "deflection": 3.0, "wire_count": 0.1},
+        "optimizer": {**small["optimizer"], "learning_rate": 0.05, "seed": 2},
+    }
+    res = opt.optimize(parse_scenario(other), progress=False)
+    assert opt._run_starts._cache_size() == before
+    assert res["best"]["worst_deflection_mm"] > 0  # the deflection term ran
+
+
 def test_a_robot_s_deflection_term_is_its_worst_reduced_deflection_under_the_tip_load():
     """The objective's pieces against the robot's compliance (``config_compliance``, itself checked against
     an independent reference in test_chain) at each of the task's configurations, under a load off every
