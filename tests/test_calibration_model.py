@@ -272,6 +272,37 @@ def test_a_program_compiled_ahead_on_a_thread_is_the_one_the_fits_run():
     np.testing.assert_array_equal(theta, np.asarray(ref[0]))
 
 
+#: A script that starts compiling a program ahead and exits at once (the 128-row program of the tests
+#: above with the model's blocks: loaded from the session's cache where they made it).
+EXIT_WHILE_COMPILING = """
+import sys
+import numpy as np
+import tension_zones as tz
+from tension_zones.calibration import Dataset, Problem, RobotModel
+from tension_zones.calibration.effects import library, nominal
+robot = tz.Robot(tz.Design(3, 20.0, 2.0))
+rng = np.random.default_rng(0)
+data = Dataset(sample=np.arange(40), q=rng.uniform(-1, 1, (40, 3)), f=np.zeros((40, 3)), p=rng.normal(size=(40, 3)))
+pb = Problem(RobotModel.of(robot), robot, data, nominal("base") + library("base"))
+thread = pb.compile_ahead(["backbone_EI", "backlash"], np.ones(40))
+print("compiling at exit:", thread.is_alive(), flush=True)
+sys.exit(3)
+"""
+
+
+def test_a_script_that_exits_while_a_program_compiles_ends_with_its_status():
+    """The interpreter's exit waits for a program compiling on a thread: a thread inside XLA's compiler
+    when the interpreter finalises aborted the process (status 134, "FATAL: exception not rethrown")."""
+    import subprocess
+    import sys
+
+    r = subprocess.run(
+        [sys.executable, "-c", EXIT_WHILE_COMPILING], check=False, capture_output=True, text=True, timeout=300
+    )
+    assert "compiling at exit: True" in r.stdout, r.stdout + r.stderr
+    assert r.returncode == 3 and "FATAL" not in r.stderr, r.stderr[-2000:]
+
+
 def test_the_runner_compiles_the_final_refits_program_ahead_without_workers(monkeypatch):
     from tension_zones.calibration import _fits
 

@@ -179,8 +179,10 @@ def engine_ahead(spec, *args) -> threading.Thread | None:
     core compiles while this one goes on: with the rod's program of a loaded single-segment set
     lowered first, the constant-curvature one is traced while the rod compiles). The thread that calls
     :func:`engine` with them later waits for it. Nothing is run on the thread: calls of the engine from
-    two threads at once deadlocked XLA:CPU. Returns the thread (join it before the process ends), or
-    None where the program exists already."""
+    two threads at once deadlocked XLA:CPU. Returns the thread, or None where the program exists
+    already. The interpreter's exit waits for the thread (not a daemon: a thread inside XLA's compiler
+    when the interpreter finalises aborts the process, status 134); the command line, which must stop
+    within seconds of Ctrl-C, ends its process without that exit (``cli._exit``)."""
     key = _key(spec, args)
     if key in _PROGRAMS:
         return None
@@ -196,7 +198,7 @@ def engine_ahead(spec, *args) -> threading.Thread | None:
             _PROGRAMS[key] = fn
             fut.set_result(fn)
 
-    t = threading.Thread(target=work, name=COMPILE_THREAD, daemon=True)
+    t = threading.Thread(target=work, name=COMPILE_THREAD)
     t.start()
     return t
 
