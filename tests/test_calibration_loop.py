@@ -327,3 +327,36 @@ def test_the_effects_kept_are_records_and_reading_them_as_dicts_is_deprecated():
         assert done["name"] == "backlash"
     with pytest.warns(DeprecationWarning), pytest.raises(KeyError):
         e["params"]  # (not there before the final refit, as the dict had no such key)
+
+
+@pytest.mark.parametrize("err_without, removed", [(1.01, True), (1.2, False)])
+def test_the_backward_step_removes_an_earlier_effect_that_only_stood_in(err_without, removed):
+    """Once an effect is kept, each earlier one is refitted without it: one whose removal raises the
+    held-out sum of squares (in units of the residual's variance) by less than its chi-square quantile
+    goes, with its refit's parameters and errors, and the round records it; one that still matters
+    stays. (The refits are given: the step's bookkeeping, not a fit.)"""
+    from tension_zones.calibration._diagnose import chi2_quantile
+    from tension_zones.calibration._loop import _Branch, _Loop
+    from tension_zones.calibration._rounds import Added, Refit, Round
+
+    class Refits:  # "refit_held_only": (theta, held-out RMSE, decision error) without each earlier effect
+        def map(self, kind, jobs):
+            assert kind == "refit_held_only" and [rest for _, rest in jobs] == [["n", "b"]]
+            return [(theta * 0.5, err_without, err_without) for theta, _ in jobs]
+
+    sl = {"n": slice(0, 1), "a": slice(1, 3), "b": slice(3, 4)}
+    fields = {f.name: None for f in dataclasses.fields(_Loop)}
+    loop = _Loop(**{**fields, "sl": sl, "run": Refits(), "m": 100, "sigma": np.ones(3), "alpha": 0.01})
+    loop = dataclasses.replace(loop, pb=type("Pb", (), {"null": np.zeros(4)})(), say=lambda _: None)
+    st = _Branch(theta=np.ones(4), err=1.5, plain=1.5, active=["n", "a"], effects=[Added("a", 1.5, 5.0)])
+    b = Refit("b", 1.0, 1.0, 0.5, 0.1, 0.5, 50.0, 50.0, 6.6, True, False, np.full(4, 2.0), 1.0, 4.0)
+    assert loop.keep(st, [b], b, Round(1, 3.0, 1.5, 1.5))
+    rise = (err_without**2 - 1.0) * 100  # (the unit: the noise's variance, 1, above 1.0^2 / 3)
+    assert (rise < chi2_quantile(0.01, 2)) == removed
+    assert st.active == (["n", "b"] if removed else ["n", "a", "b"])
+    assert [e.name for e in st.effects] == (["b"] if removed else ["a", "b"])
+    assert st.err == (err_without if removed else 1.0)
+    np.testing.assert_array_equal(st.theta, [1.0, 0.0, 0.0, 1.0] if removed else np.full(4, 2.0))
+    rd = st.rounds[-1]
+    assert rd.accepted == "b" and [r.name for r in rd.removed] == (["a"] if removed else [])
+    assert st.models[-1][0] == st.active
