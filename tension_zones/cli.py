@@ -1104,8 +1104,8 @@ def _interrupt_watchdog(grace: float = INTERRUPT_GRACE_S):
 def _exit(code: int) -> NoReturn:
     """End the process with status ``code``. While a program compiles on a thread (a command
     interrupted or failed mid-calibration leaves it: ``Runner.close`` does not wait for it), without
-    the interpreter's shutdown: a thread inside XLA's compiler when the interpreter finalises aborts
-    the process after the command's one line ("FATAL: exception not rethrown", status 134)."""
+    the interpreter's shutdown, which would wait for the compile (``engine_ahead``): Ctrl-C must end
+    the command within seconds."""
     import threading
 
     if any(t.name == COMPILE_THREAD and t.is_alive() for t in threading.enumerate()):

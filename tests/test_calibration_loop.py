@@ -345,9 +345,9 @@ def test_the_backward_step_removes_an_earlier_effect_that_only_stood_in(err_with
             return [(theta * 0.5, err_without, err_without) for theta, _ in jobs]
 
     sl = {"n": slice(0, 1), "a": slice(1, 3), "b": slice(3, 4)}
-    fields = {f.name: None for f in dataclasses.fields(_Loop)}
-    loop = _Loop(**{**fields, "sl": sl, "run": Refits(), "m": 100, "sigma": np.ones(3), "alpha": 0.01})
-    loop = dataclasses.replace(loop, pb=type("Pb", (), {"null": np.zeros(4)})(), say=lambda _: None)
+    given = {"sl": sl, "run": Refits(), "m": 100, "sigma": np.ones(3), "alpha": 0.01, "say": lambda _: None}
+    given["pb"] = type("Pb", (), {"null": np.zeros(4)})()  # (only its null values are read)
+    loop = _Loop(**{**{f.name: None for f in dataclasses.fields(_Loop)}, **given})
     st = _Branch(theta=np.ones(4), err=1.5, plain=1.5, active=["n", "a"], effects=[Added("a", 1.5, 5.0)])
     b = Refit("b", 1.0, 1.0, 0.5, 0.1, 0.5, 50.0, 50.0, 6.6, True, False, np.full(4, 2.0), 1.0, 4.0)
     assert loop.keep(st, [b], b, Round(1, 3.0, 1.5, 1.5))

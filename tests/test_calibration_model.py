@@ -272,8 +272,7 @@ def test_a_program_compiled_ahead_on_a_thread_is_the_one_the_fits_run():
     np.testing.assert_array_equal(theta, np.asarray(ref[0]))
 
 
-#: A script that starts compiling a program ahead and exits at once (the 128-row program of the tests
-#: above with the model's blocks: loaded from the session's cache where they made it).
+#: A script that starts compiling a program ahead (one segment, 40 samples) and exits at once.
 EXIT_WHILE_COMPILING = """
 import sys
 import numpy as np

@@ -18,24 +18,32 @@ SEG = tz.Design(3, 60.0, 4.5, wire_stiffness=50.0, backbone_EI=2454.0)
 Q = jnp.array([-3.0, 0.5, 0.5])
 
 
-@partial(jax.jit, static_argnums=1)
-def _solution(phys, st, q, f):
-    B = E.solve(phys, st, q, f)
-    p, _ = chain_tip(E.piece_lengths(phys, st), B)
-    sm = E._Sample(phys, st, q, f, jnp.zeros_like(q), jnp.asarray(True))
-    return p, B, sm.k * jnp.maximum(sm.stretch(B.reshape(-1)), 0.0)
+@partial(jax.jit, static_argnums=(1, 6))
+def _solution(phys, st, q, f, d, loaded, jacobians):
+    """One sample's equilibrium (``d`` the wires' directions of motion, used by friction only) and, at
+    it, the tip, the non-conservative force, the tensions, and with ``jacobians`` the force's Jacobian
+    in closed form and by forward mode: one program per structure (eagerly, every operation would
+    compile a program of its own)."""
+    B = E.solve(phys, st, q, f, d)
+    x = B.reshape(-1)
+    sm = E._Sample(phys, st, q, f, d, loaded)
+    out = {"p": chain_tip(E.piece_lengths(phys, st), B)[0], "B": B, "force": sm.force(x)}
+    out["tension"] = sm.k * jnp.maximum(sm.stretch(x), 0.0)
+    if jacobians:
+        out.update(force_jacobian=sm.force_jacobian(x), force_jacobian_ad=jax.jacfwd(sm.force)(x))
+    return out
 
 
 def solved(robot, q, load, m, freedom=None):
-    """Tip position, piece bending vectors and the wires' tensions (N) of the package's solution (one
-    program per structure: eagerly, every operation would compile a program of its own)."""
+    """Tip position, piece bending vectors and the wires' tensions (N) of the package's solution."""
     phys = robot.params()
     phys["gravity"] = jnp.asarray(load.gravity, float)
     if freedom is not None:
         phys["curvature_freedom"] = jnp.asarray(freedom, float)
     st = Structure(robot.n_wires_per_segment, m)
-    out = _solution(phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float))
-    return tuple(np.asarray(a) for a in out)
+    q = jnp.asarray(q, float)
+    sol = _solution(phys, st, q, jnp.asarray(load.tip_force, float), jnp.zeros_like(q), jnp.asarray(True), False)
+    return tuple(np.asarray(sol[k]) for k in ("p", "B", "tension"))
 
 
 def test_tendons_alone_give_constant_curvature_exactly():
@@ -104,31 +112,16 @@ def test_two_segments_under_weight_match_the_rod():
     assert np.linalg.norm(p - ref.tip_position) < 0.05 < np.linalg.norm(p1 - ref.tip_position)
 
 
-@partial(jax.jit, static_argnums=(1, 6))
-def _friction_solution(phys, st, q, f, d, loaded, jacobians):
-    B = E.solve(phys, st, q, f, d)
-    x = B.reshape(-1)
-    sm = E._Sample(phys, st, q, f, d, loaded)
-    out = {"p": chain_tip(E.piece_lengths(phys, st), B)[0], "force": sm.force(x)}
-    out["tension"] = sm.k * jnp.maximum(sm.stretch(x), 0.0)
-    if jacobians:
-        out.update(force_jacobian=sm.force_jacobian(x), force_jacobian_ad=jax.jacfwd(sm.force)(x))
-    return out
-
-
 def _with_friction(robot, q, mu, d, m, load=None, jacobians=False):
-    """The equilibrium with friction along the routing (``d`` the wires' directions of motion): its tip,
-    the non-conservative force and the tensions there, and with ``jacobians`` the force's Jacobian in
-    closed form and by forward mode; one program per structure."""
+    """``_solution`` with friction along the routing (``mu``) and ``load``."""
     load = Load.none() if load is None else load
     phys = robot.params()
     phys.update(friction=jnp.asarray(mu, float), gravity=jnp.asarray(load.gravity, float))
     st = Structure(robot.n_wires_per_segment, m)
     loaded = jnp.asarray(bool(np.any(load.tip_force) or np.any(load.gravity)))
-    out = _friction_solution(
-        phys, st, jnp.asarray(q, float), jnp.asarray(load.tip_force, float), jnp.asarray(d, float), loaded, jacobians
-    )
-    return {k: np.asarray(v) for k, v in out.items()}
+    f = jnp.asarray(load.tip_force, float)
+    sol = _solution(phys, st, jnp.asarray(q, float), f, jnp.asarray(d, float), loaded, jacobians)
+    return {k: np.asarray(v) for k, v in sol.items()}
 
 
 @pytest.mark.parametrize("d", [-1.0, 1.0], ids=["pulled", "released"])
