@@ -264,7 +264,7 @@ def test_known_optimum_pitch_radius_and_stiffness_at_upper_bounds():
 @pytest.mark.slow
 def test_new_numbers_of_the_same_shapes_do_not_recompile():
     opt.optimize(parse_scenario(SMALL), progress=False)
-    before = opt._run_starts._cache_size()
+    before = opt.programs()
     other = {
         **SMALL,
         "length_mm": 31.0,
@@ -278,7 +278,24 @@ def test_new_numbers_of_the_same_shapes_do_not_recompile():
         "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.2, "seed": 5},
     }
     opt.optimize(parse_scenario(other), progress=False)
-    assert opt._run_starts._cache_size() == before
+    assert opt.programs() == before
+
+
+def test_a_later_process_runs_the_stored_program_without_tracing(monkeypatch):
+    """The optimiser's program is kept on disk before tracing (``_xla.stored_program``): with this
+    process's programs forgotten, as in a new process, the run loads it, traces nothing and gives the
+    same result, bit for bit."""
+    sc = parse_scenario(SMALL)
+    first = opt.optimize(sc, progress=False)
+    monkeypatch.setattr(opt, "_RUNS", {})
+
+    def traced(*args, **kwargs):
+        raise AssertionError("the optimiser's program was traced again")
+
+    monkeypatch.setattr(opt, "_run_starts", traced)
+    again = opt.optimize(sc, progress=False)
+    first.pop("seconds"), again.pop("seconds")
+    assert json.dumps(again, default=str) == json.dumps(first, default=str)
 
 
 @pytest.mark.slow
@@ -505,7 +522,7 @@ def test_a_robot_s_optimum_beats_its_start_and_is_what_a_fresh_evaluation_gives(
 @pytest.mark.slow
 def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
     opt.optimize(_two(weights={"deflection": 0.0}), progress=False)
-    before = opt._run_starts._cache_size()
+    before = opt.programs()
     segments = [
         {**TWO["segments"][0], "length_mm": 50.0, "pitch_radius_mm": [1.0, 3.5], "preload_N": [0.5, 1.0]},
         {**TWO["segments"][1], "n_wires": [4], "length_mm": 20.0, "backbone_EI_Nmm2": 900.0},
@@ -520,7 +537,7 @@ def test_new_numbers_of_a_robot_s_shapes_do_not_recompile():
         "optimizer": {**TWO["optimizer"], "learning_rate": 0.2, "seed": 5},
     }
     opt.optimize(parse_scenario(other), progress=False)
-    assert opt._run_starts._cache_size() == before
+    assert opt.programs() == before
 
 
 def test_a_loaded_robot_s_new_numbers_do_not_recompile():
@@ -528,7 +545,7 @@ def test_a_loaded_robot_s_new_numbers_do_not_recompile():
     and step size run the program compiled for the first scenario."""
     small = {"samples": 16, "optimizer": {"starts": 1, "steps": 3, "learning_rate": 0.1}}
     opt.optimize(_two(**small), progress=False)
-    before = opt._run_starts._cache_size()
+    before = opt.programs()
     segments = [
         {**TWO["segments"][0], "length_mm": 45.0, "backbone_EI_Nmm2": 3000.0, "wire_stiffness_N_per_mm": [70.0, 70.0]},
         {**TWO["segments"][1], "n_wires": [4], "pitch_radius_mm": [1.5, 2.5], "preload_N": [0.5, 1.5]},
@@ -542,7 +559,7 @@ def test_a_loaded_robot_s_new_numbers_do_not_recompile():
         "optimizer": {**small["optimizer"], "learning_rate": 0.05, "seed": 2},
     }
     res = opt.optimize(parse_scenario(other), progress=False)
-    assert opt._run_starts._cache_size() == before
+    assert opt.programs() == before
     assert res["best"]["worst_deflection_mm"] > 0  # the deflection term ran
 
 

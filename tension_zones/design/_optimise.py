@@ -52,7 +52,7 @@ import numpy as np
 import optax
 
 from .._numerics import compact_programs
-from .._xla import fast_compile_options
+from .._xla import fast_compile_options, stored_program
 from ..model._design import Design
 from ..model._robot import Robot, routing_matrix
 from ..model._zones import tension_mask
@@ -558,7 +558,6 @@ class _Chain:
 # ---------------------------------------------------------------------------------------------
 # The run
 # ---------------------------------------------------------------------------------------------
-@functools.partial(jax.jit, static_argnames=("problem", "steps"), compiler_options=fast_compile_options())
 def _run_starts(z0, bounds, task, base, lr, sharp0, *, problem, steps):
     """Adam from every start at once (vmap over the leading axis of z0), continuation in sharpness.
 
@@ -603,6 +602,40 @@ def _run_starts(z0, bounds, task, base, lr, sharp0, *, problem, steps):
         return jnp.where(jnp.isnan(best), jnp.inf, best), best_out, hist[1:]
 
     return jax.vmap(one_start)(z0)
+
+
+#: The optimiser's programs in this process, by problem, step count and argument shapes.
+_RUNS: dict = {}
+
+
+def _run(problem, steps: int, *args):
+    """:func:`_run_starts` for ``problem`` and ``steps`` (static) on ``args``, compiled once per
+    problem, step count and argument shapes, and kept on disk before tracing
+    (``_xla.stored_program``): a later process (the command run again, a new notebook kernel) skips
+    the trace and lowering, which take about as long as the compile for these programs."""
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    key = (
+        problem,
+        steps,
+        tree,
+        tuple((np.shape(a), str(jnp.asarray(a).dtype), getattr(a, "weak_type", False)) for a in leaves),
+    )
+    fn = _RUNS.get(key)
+    if fn is None:
+
+        def flat(*leaves):  # (an exported program's arguments are plain arrays: no dataclass to register)
+            return _run_starts(*jax.tree_util.tree_unflatten(tree, leaves), problem=problem, steps=steps)
+
+        opts = fast_compile_options()
+        fn = jax.jit(flat, compiler_options=opts)
+        fn = _RUNS[key] = stored_program(fn, tuple(leaves), f"optimiser|{problem!r}|{steps}|{tree}", opts)
+    return fn(*leaves)
+
+
+def programs() -> int:
+    """How many programs the optimiser has traced in this process (a test counts them): one per
+    problem, step count and argument shapes; new values never add one."""
+    return sum(fn._cache_size() for fn in _RUNS.values())
 
 
 @functools.partial(jax.jit, static_argnames=("S", "n", "n_gaps"))
@@ -689,16 +722,8 @@ def _run_segment(sc: Scenario, n: int, key):
     free, arc = sc.free_wire_angles, sc.forbidden_arc is not None
     z0 = _initial(key, S=sc.starts, n=n, n_gaps=n + 1 if arc else n)
     problem = _Segment(n, free, arc, sc.w_deflection > 0)
-    best, out, h = _run_starts(
-        z0,
-        bounds,
-        _task(sc),
-        base,
-        jnp.asarray(sc.learning_rate),
-        jnp.asarray(sc.sharpness),
-        problem=problem,
-        steps=sc.steps,
-    )
+    lr, sharp = jnp.asarray(sc.learning_rate), jnp.asarray(sc.sharpness)
+    best, out, h = _run(problem, sc.steps, z0, bounds, _task(sc), base, lr, sharp)
     ((r, k, angles), exact, pieces), i = _best_start(best, out)
     d = base.replace(pitch_radius=float(r), wire_stiffness=float(k), wire_angles=angles)
     return _result_row(sc, n, d, exact, pieces), np.asarray(h[i]).tolist()
@@ -708,16 +733,9 @@ def _run_chain(sc: Scenario, counts: tuple[int, ...], key):
     """One combination of wire counts' search (several segments): its result row and history."""
     base = _base_robot(sc, counts)
     z0 = _initial_box(key, starts=sc.starts, segments=len(counts))
-    best, out, h = _run_starts(
-        z0,
-        _chain_bounds(sc, counts),
-        _chain_task(sc),
-        base,
-        jnp.asarray(sc.learning_rate),
-        jnp.asarray(sc.sharpness),
-        problem=_Chain(counts, sc.w_deflection > 0),
-        steps=sc.steps,
-    )
+    problem = _Chain(counts, sc.w_deflection > 0)
+    lr, sharp = jnp.asarray(sc.learning_rate), jnp.asarray(sc.sharpness)
+    best, out, h = _run(problem, sc.steps, z0, _chain_bounds(sc, counts), _chain_task(sc), base, lr, sharp)
     ((r, k, p), exact, pieces), i = _best_start(best, out)
     robot = with_numbers(base, pitch_radius=r, wire_stiffness=k, preload=p)
     return _chain_row(sc, robot, exact, pieces), np.asarray(h[i]).tolist()
