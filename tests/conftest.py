@@ -115,6 +115,18 @@ def two_segments(preload: float = 0.0) -> tz.Robot:
     return tz.Robot([proximal, distal])
 
 
+#: A small optimiser scenario (3 wires, 2 starts x 40 steps, a coarse task grid): tests that run the
+#: optimiser for something else than its result take it, so that they share its one compiled program.
+SMALL_SCENARIO = {
+    "n_wires": [3],
+    "pitch_radius_mm": [1.0, 2.5],
+    "wire_stiffness_N_per_mm": [55.0, 105.0],
+    "theta_L_deg": [30.0, 80.0, 25.0],
+    "delta_deg": [0.0, 350.0, 25.0],
+    "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1},
+}
+
+
 def omega_jacobian(fn_R, x):
     """Columns vee(dR/dx_i R^T) for a rotation-valued fn of a vector x."""
     R = fn_R(x)

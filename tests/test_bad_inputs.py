@@ -20,6 +20,7 @@ import sys
 
 import numpy as np
 import pytest
+from conftest import SMALL_SCENARIO
 
 import tension_zones as tz
 from tension_zones.cli import main
@@ -1043,7 +1044,7 @@ def test_a_full_disk_names_the_file_and_leaves_nothing(tmp_path, monkeypatch, ca
     from tension_zones.cli import main
 
     scenario = tmp_path / "s.scenario.json"
-    scenario.write_text(json.dumps({"n_wires": 3, "optimizer": {"steps": 2, "starts": 1}}))
+    scenario.write_text(json.dumps(SMALL_SCENARIO))  # (the optimiser's program of other tests)
     out = tmp_path / "o"
 
     def full(*a, **k):

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import SMALL_SCENARIO as SMALL
 from hypothesis import example, given
 from hypothesis import strategies as st
 
@@ -232,16 +233,6 @@ def test_restricted_directions_match_brute_force_and_even_layout_is_infeasible()
     # what the optimiser reports is the exact objective of the design it returns
     d = tz.Design(3, 20.0, 2.0, wire_angles=np.radians(best["wire_angles_deg"]))
     assert opt.evaluate_design(sc, d)["objective"] == pytest.approx(best["objective"], rel=1e-9)
-
-
-SMALL = {
-    "n_wires": [3],
-    "pitch_radius_mm": [1.0, 2.5],
-    "wire_stiffness_N_per_mm": [55.0, 105.0],
-    "theta_L_deg": [30.0, 80.0, 25.0],
-    "delta_deg": [0.0, 350.0, 25.0],
-    "optimizer": {"starts": 2, "steps": 40, "learning_rate": 0.1},
-}
 
 
 @pytest.mark.slow
