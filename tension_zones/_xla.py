@@ -166,6 +166,17 @@ def classes_digest(classes) -> str | None:
     return h.hexdigest() if files else ""
 
 
+def shapes_key(args) -> tuple:
+    """What a jitted program of ``args`` is compiled for: their tree (static fields included) and each
+    leaf's shape and type. A key of a process's own table of programs, beside their static
+    configuration."""
+    import jax
+    import jax.numpy as jnp
+
+    leaves, tree = jax.tree_util.tree_flatten(args)
+    return tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves)
+
+
 def stored_program(fn, args: tuple, key: str, compiler_options: dict | None = None):
     """A callable equal to the jitted ``fn`` on arguments with the shapes and dtypes of ``args``,
     kept on disk in ``cache_dir()/programs`` (exported after the first trace, loaded by later

@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._lsq import levenberg_marquardt
-from .._xla import COMPILE_THREAD, classes_digest, fast_compile_options, stored_program
+from .._xla import COMPILE_THREAD, classes_digest, fast_compile_options, shapes_key, stored_program
 
 
 @dataclasses.dataclass(frozen=True)
@@ -130,8 +130,7 @@ _PROGRAMS: dict = {}
 
 
 def _key(spec, args):
-    leaves, tree = jax.tree_util.tree_flatten(args)
-    return (spec, tree, tuple((jnp.shape(a), jnp.result_type(a)) for a in leaves))
+    return (spec, *shapes_key(args))
 
 
 def _optimised(spec) -> bool:

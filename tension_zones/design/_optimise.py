@@ -52,7 +52,7 @@ import numpy as np
 import optax
 
 from .._numerics import compact_programs
-from .._xla import fast_compile_options, stored_program
+from .._xla import fast_compile_options, shapes_key, stored_program
 from ..model._design import Design
 from ..model._robot import Robot, routing_matrix
 from ..model._zones import tension_mask
@@ -614,12 +614,7 @@ def _run(problem, steps: int, *args):
     (``_xla.stored_program``): a later process (the command run again, a new notebook kernel) skips
     the trace and lowering, which take about as long as the compile for these programs."""
     leaves, tree = jax.tree_util.tree_flatten(args)
-    key = (
-        problem,
-        steps,
-        tree,
-        tuple((np.shape(a), str(jnp.asarray(a).dtype), getattr(a, "weak_type", False)) for a in leaves),
-    )
+    key = (problem, steps, *shapes_key(args))
     fn = _RUNS.get(key)
     if fn is None:
 
