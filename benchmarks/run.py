@@ -593,19 +593,54 @@ def bench_robots(quick):
     for (label, n, _), first, t in zip(cases, firsts, times):
         med = statistics.median(t)
         rows.append({"case": label, "configurations": n, "per_s": n / med, "compile_s": max(first - med, 0.0)})
-    return rows
+    return {"sweeps": rows, "bounds": bench_bounds(quick)}
 
 
-def markdown_robots(rows) -> str:
+def bench_bounds(quick):
+    """The exact tip bound's two enumerations side by side per wire count (one bound, random
+    generators, a chunk of ``ROBOT_CHUNK`` vmapped): where ``zonotope_max_sq`` switches from the
+    box's vertices to the face edges (``BOX_VERTICES_MAX``)."""
+    import jax
+
+    from tension_zones.analysis._chain import BOX_VERTICES_MAX, _box_vertices_max_sq, _face_edges_max_sq
+    from tension_zones.analysis._sweep import ROBOT_CHUNK
+
+    rng = np.random.default_rng(0)
+    out = []
+    for n in (6, 9, 10, 11, 12, 13, 14):
+        G = jax.device_put(rng.normal(size=(ROBOT_CHUNK, 3, n)))
+        row = {"wires": n, "box_vertices_max": BOX_VERTICES_MAX}
+        for key, fn in (("box_us", _box_vertices_max_sq), ("faces_us", _face_edges_max_sq)):
+            f = jax.jit(jax.vmap(fn))
+            run = lambda f=f, G=G: jax.block_until_ready(f(G))
+            run()
+            row[key] = min(_seconds(run) for _ in range(3 if quick else 10)) / ROBOT_CHUNK * 1e6
+        out.append(row)
+    return out
+
+
+def markdown_robots(res) -> str:
     out = [
         "| robot | configurations | configurations/s | compile (s) | target |",
         "|---|---|---|---|---|",
     ]
-    for r in rows:
+    for r in res["sweeps"]:
         target = ""
         if r["case"].startswith("3 segments") and "statics" not in r["case"]:
             target = f">= 5e+05/s: {'met' if r['per_s'] >= 5e5 else 'MISSED'}"
         out.append(f"| {r['case']} | {r['configurations']:,} | {r['per_s']:.3g} | {r['compile_s']:.2f} | {target} |")
+    out += [
+        "",
+        (
+            "One exact bound, us per configuration (vmapped over a chunk, one thread's program): every vertex "
+            "pair of the box against the ends of the zonotope's face edges. `zonotope_max_sq` takes the box up "
+            f"to `BOX_VERTICES_MAX` = {res['bounds'][0]['box_vertices_max']} wires."
+        ),
+        "",
+        "| wires | box vertices | face edges |",
+        "|---|---|---|",
+    ]
+    out += [f"| {r['wires']} | {r['box_us']:.3g} | {r['faces_us']:.3g} |" for r in res["bounds"]]
     return "\n".join(out)
 
 

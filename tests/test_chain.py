@@ -14,6 +14,7 @@ from reference_chain import measures
 
 import tension_zones as tz
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
+from tension_zones.analysis._chain import BOX_VERTICES_MAX, _face_edges_max_sq, singular_values3
 from tension_zones.model import Robot
 from tension_zones.model._chain_statics import config_compliance
 from tension_zones.model._chain_zones import crossing_wires, segment_tension_map
@@ -114,8 +115,8 @@ def _brute(G):
 
 
 @st.composite
-def generators(draw):
-    n = draw(st.integers(1, 7))
+def generators(draw, max_n=7):
+    n = draw(st.integers(1, max_n))
     G = np.array(draw(st.lists(st.floats(-3, 3), min_size=3 * n, max_size=3 * n))).reshape(3, n)
     kind = draw(st.sampled_from(["any", "flat", "line", "parallel", "zeros"]))
     if kind == "flat":
@@ -130,11 +131,55 @@ def generators(draw):
 
 
 ZONOTOPE = jax.jit(zonotope_max_sq)
+FACE_EDGES = jax.jit(_face_edges_max_sq)
+
+
+@given(generators(max_n=BOX_VERTICES_MAX + 2))
+def test_the_zonotopes_largest_norm_is_its_largest_vertex(G):
+    assert float(ZONOTOPE(jnp.asarray(G))) == pytest.approx(_brute(G), rel=1e-12, abs=1e-12)
 
 
 @given(generators())
-def test_the_zonotopes_largest_norm_is_its_largest_vertex(G):
-    assert float(ZONOTOPE(jnp.asarray(G))) == pytest.approx(_brute(G), rel=1e-12, abs=1e-12)
+def test_the_face_edges_ends_reach_the_largest_vertex(G):
+    """The enumeration taken beyond ``BOX_VERTICES_MAX`` generators, on few: flat, parallel, zero."""
+    assert float(FACE_EDGES(jnp.asarray(G))) == pytest.approx(_brute(G), rel=1e-12, abs=1e-12)
+
+
+@st.composite
+def blocks(draw):
+    n = draw(st.integers(1, 12))
+    J = np.array(draw(st.lists(st.floats(-3, 3), min_size=3 * n, max_size=3 * n))).reshape(3, n)
+    kind = draw(st.sampled_from(["any", "zero row", "rank one", "near rank two", "equal"]))
+    if kind == "zero row":
+        J[2] = 0.0
+    elif kind == "rank one":
+        J = np.outer([0.3, -1.0, 2.0], J[0])
+    elif kind == "near rank two":
+        J[2] = 0.4 * J[0] - J[1] + 1e-9 * J[2]
+    elif kind == "equal" and n >= 3:
+        J = np.zeros((3, n))
+        J[[0, 1, 2], [0, 1, 2]] = 2.0
+    return J * 10.0 ** draw(st.integers(-3, 3))
+
+
+SINGULAR = jax.jit(jax.vmap(singular_values3))
+SINGULAR_JVP = jax.jit(lambda J, dJ: jax.jvp(singular_values3, (J,), (dJ,)))
+
+
+@given(blocks())
+def test_a_blocks_singular_values_are_numpys_and_their_derivatives_are_finite(J):
+    want = np.zeros(3)
+    want[: min(3, J.shape[1])] = np.linalg.svd(J, compute_uv=False)
+    got = np.asarray(SINGULAR(jnp.asarray(J)[None])[0])
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * max(want[0], 1e-300))
+    dJ = np.cos(np.arange(J.size)).reshape(J.shape)
+    _, tangent = SINGULAR_JVP(jnp.asarray(J), jnp.asarray(dJ))
+    assert np.all(np.isfinite(np.asarray(tangent)))
+    gap = np.min(np.abs(np.diff(want[: min(3, J.shape[1])]))) if J.shape[1] > 1 else np.inf
+    if J.shape[1] >= 3 and want[2] > 1e-6 * want[0] and gap > 1e-6 * want[0]:  # distinct: one derivative
+        h = 1e-7 * max(1.0, np.max(np.abs(J)))
+        fd = (np.linalg.svd(J + h * dJ, compute_uv=False) - np.linalg.svd(J - h * dJ, compute_uv=False)) / (2 * h)
+        np.testing.assert_allclose(np.asarray(tangent), fd, rtol=1e-5, atol=1e-6 * max(1.0, want[0]))
 
 
 def test_new_values_never_recompile():

@@ -10,7 +10,8 @@ With two or more segments ``J_v`` and ``J_w`` (3 x N) have rank up to 3 (``min(3
 ``sigma_min`` use the ``min(3, 2S)``-th singular value, which for one segment is the paper's
 ``sigma_2``. The uncertainty box ``dq [-1, 1]^N`` maps to the zonotope ``J_v dq [-1, 1]^N`` in
 space, whose largest norm is at a vertex; :func:`zonotope_max_sq` lists a superset of its vertices,
-each a point of the zonotope, so the maximum is exact (no sampling, no ``2^N`` enumeration).
+each a point of the zonotope, so the maximum is exact (no sampling): the box's ``2^(N - 1)``
+vertex pairs for a few wires, the ends of the zonotope's face edges (``O(N^3)``) for many.
 
 **Coordinates.** The chain's configuration coordinates are the bending vectors ``B``: regular at the
 straight pose and the same in every bending direction. Where the taut wires' rows have full rank
@@ -23,6 +24,7 @@ pseudo-inverse's minimum-norm step does. A one-segment robot is therefore the se
 from __future__ import annotations
 
 import functools
+import itertools
 
 import jax
 import jax.numpy as jnp
@@ -33,14 +35,45 @@ from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
 
+#: Up to this many generators the largest norm is taken over every vertex of the box at once: one
+#: matrix product with the ``2^(N - 1)`` sign vectors (``s`` and ``-s`` give the same norm), which a
+#: vmapped sweep runs as a single matrix product over its chunk. Beyond, the face-edge enumeration,
+#: whose cost grows as ``N^3`` where the box's grows as ``2^N`` (crossover measured: ``benchmarks/``,
+#: ROBOTS).
+BOX_VERTICES_MAX = 12
+
 
 def zonotope_max_sq(G):
     """``max |G s|^2`` over ``s in [-1, 1]^N`` for generators ``G`` (3, N): the squared largest norm of
     the zonotope ``G [-1, 1]^N``, exactly.
 
-    A norm is convex, so its maximum is at a vertex, and every vertex is an end of an edge on a face.
-    For each pair ``i < j`` of generators, with the face normal ``w = g_i x g_j`` and the in-face
-    direction ``t = w x g_i``, the candidates take the signs of ``g_k . (w + e s t + e^2 r g_i)`` for a
+    A norm is convex, so its maximum is at a vertex of the box's image. Up to
+    :data:`BOX_VERTICES_MAX` generators every vertex of the box is mapped (:func:`_box_vertices_max_sq`),
+    beyond only the ends of the zonotope's face edges (:func:`_face_edges_max_sq`); both are exact.
+    """
+    if G.shape[1] <= BOX_VERTICES_MAX:
+        return _box_vertices_max_sq(G)
+    return _face_edges_max_sq(G)
+
+
+@functools.cache
+def _half_box_signs(n: int) -> np.ndarray:
+    """(n, 2^(n - 1)): every sign vector of ``{-1, 1}^n`` whose first entry is ``+1``."""
+    signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)), dtype=float)
+    return signs[signs[:, 0] > 0].T
+
+
+def _box_vertices_max_sq(G):
+    """:func:`zonotope_max_sq` over every vertex of the box, one of each pair ``s, -s``."""
+    X = G @ jnp.asarray(_half_box_signs(G.shape[1]), G.dtype)  # (3, 2^(N-1)): points of the zonotope
+    return jnp.max(jnp.sum(X * X, axis=0))
+
+
+def _face_edges_max_sq(G):
+    """:func:`zonotope_max_sq` over the ends of the zonotope's face edges, ``O(N^3)``.
+
+    Every vertex is an end of an edge on a face. For each pair ``i < j`` of generators, with the face
+    normal ``w = g_i x g_j`` and the in-face direction ``t = w x g_i``, the candidates take the signs of ``g_k . (w + e s t + e^2 r g_i)`` for a
     small ``e`` and ``s, r = +-1`` (ties, within ``PARALLEL_TOL`` eps, go to the next term): the ends
     of the face's edges parallel to ``g_i``, on both sides. A face's edges along all but one of its
     directions reach all its vertices, so ``i < j`` suffices (``i = j`` adds the ends of a zonotope
@@ -92,11 +125,71 @@ def _rank_cap(robot: Robot) -> int:
     return min(3, 2 * robot.n_segments)
 
 
+#: Sweeps of the one-sided Jacobi method over a block's three rows: the off-diagonal part falls
+#: quadratically, to rounding after four on every test of ``tests/test_chain.py``; one more for margin.
+JACOBI_SWEEPS = 5
+
+
+def _rows_orthogonalised(J):
+    """One-sided Jacobi (Hestenes) on the three rows of ``J`` (3, N): plane rotations ``Q`` (3, 3),
+    orthogonal, such that the rows of ``W = Q J`` are orthogonal; their norms are ``J``'s singular
+    values, each to high relative accuracy. Elementwise over the rows, so that vmapped it fuses (a
+    batch of LAPACK calls costs more than the whole measure)."""
+    tiny = jnp.finfo(J.dtype).tiny
+
+    def rotate(i, j, r, q):
+        a, b, c = r[i] @ r[i], r[j] @ r[j], r[i] @ r[j]
+        turn = jnp.abs(c) > tiny  # already orthogonal: no rotation (and no 0 / 0)
+        zeta = (b - a) / (2.0 * jnp.where(turn, c, 1.0))
+        t = jnp.sign(zeta) / (jnp.abs(zeta) + jnp.hypot(1.0, zeta))  # the smaller root of t^2 + 2 zeta t = 1
+        t = jnp.where(turn, jnp.where(zeta == 0, 1.0, t), 0.0)
+        cs = 1.0 / jnp.sqrt(1.0 + t * t)
+        sn = cs * t
+        r = r.at[jnp.array([i, j])].set(jnp.stack([cs * r[i] - sn * r[j], sn * r[i] + cs * r[j]]))
+        q = q.at[jnp.array([i, j])].set(jnp.stack([cs * q[i] - sn * q[j], sn * q[i] + cs * q[j]]))
+        return r, q
+
+    def sweep(_, rq):
+        for i, j in ((0, 1), (0, 2), (1, 2)):
+            rq = rotate(i, j, *rq)
+        return rq
+
+    return jax.lax.fori_loop(0, JACOBI_SWEEPS, sweep, (J, jnp.eye(3, dtype=J.dtype)))
+
+
+@jax.custom_jvp
+def _row_singular_values(J):
+    """The singular values of ``J`` (3, N), one per row of :func:`_rows_orthogonalised`, unsorted."""
+    W, _ = _rows_orthogonalised(J)
+    return jnp.sqrt(jnp.sum(W * W, axis=1))
+
+
+@_row_singular_values.defjvp
+def _row_singular_values_jvp(primals, tangents):
+    """``d sigma_k = u_k^T dJ v_k`` with ``u_k`` row ``k`` of ``Q`` and ``v_k = W_k / sigma_k``, as
+    JAX's ``svd``; finite where two values meet (no rotation angle is differentiated), 0 at a zero
+    value."""
+    (J,), (dJ,) = primals, tangents
+    W, Q = _rows_orthogonalised(J)
+    s = jnp.sqrt(jnp.sum(W * W, axis=1))
+    pos = s > 0
+    ds = jnp.einsum("ki,ij,kj->k", Q, dJ, W) / jnp.where(pos, s, 1.0)
+    return s, jnp.where(pos, ds, 0.0)
+
+
+def singular_values3(J):
+    """The singular values of a (3, N) block, descending (3,): those of ``jnp.linalg.svd`` to
+    rounding, padded with zeros where ``N < 3``."""
+    a, b, c = _row_singular_values(J)
+    hi, lo = jnp.maximum(a, b), jnp.minimum(a, b)
+    return jnp.stack([jnp.maximum(hi, c), jnp.maximum(lo, jnp.minimum(hi, c)), jnp.minimum(lo, c)])
+
+
 def _singular(J, r: int, n_wires: int):
     """``(sigma_1, sigma_r, sigma_min_nz)`` of a (3, N) block: the largest, the ``r``-th and the smallest
     non-zero singular value among the first ``r`` (NumPy's rank rule ``max(3, N) eps sigma_1``).
     Singular values only (no vectors): the gradient is finite where two of them meet."""
-    s = jnp.linalg.svd(J, compute_uv=False)
+    s = singular_values3(J)
     s1 = s[0]
     rtol = max(3, n_wires) * eps_of(J)
     head = s[:r]
