@@ -371,3 +371,85 @@ def pinv_rows(gram_pinv, a, b):
     """The rows of ``pinv(J) = pinv(G) J^T`` (per-wire values) from :func:`gram_pinv_cols`."""
     i00, i01, i11 = gram_pinv
     return wmap(lambda x, y: i00 * x + i01 * y, a, b), wmap(lambda x, y: i01 * x + i11 * y, a, b)
+
+
+# -- singular values of a small matrix by one-sided Jacobi ----------------------------------------
+#: The most Jacobi sweeps (each rotates every pair of rows once); convergence is quadratic, so a few
+#: suffice in practice and the loop ends as soon as every pair is orthogonal to rounding.
+JACOBI_MAX_SWEEPS = 30
+#: Jacobi's rotations grow as the square of the rows, LAPACK's batch of calls costs about the same per
+#: matrix: vmapped over a chunk, Jacobi is the faster up to three rows (a robot's (3, N) Jacobian
+#: blocks), LAPACK from six (a three-segment robot's (N, 6) taut wire directions).
+JACOBI_MAX_ROWS = 3
+
+
+def _jacobi_rows(R):
+    """One-sided Jacobi (Hestenes) on the ``k`` rows of ``R`` (k, n): plane rotations ``Q`` (k, k),
+    orthogonal, such that the rows of ``W = Q R`` are orthogonal (each pair to ``n eps``); their norms
+    are ``R``'s singular values, each to high relative accuracy. Rows as a list, rotated elementwise:
+    vmapped, every step is a plain array operation over the batch (a batch of LAPACK calls costs
+    more); the sweeps run until every batch member has converged."""
+    k = R.shape[0]
+    pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
+    tiny, tol = jnp.finfo(R.dtype).tiny, R.shape[1] * eps_of(R)  # a dot product's rounding
+    eye = jnp.eye(k, dtype=R.dtype)
+
+    floor = tol * jnp.sum(R * R)  # rows at rounding's size (a zero singular value) point anywhere
+
+    def sweep(state):
+        r, q, n, _ = state
+        r, q, worst = list(r), list(q), jnp.zeros((), R.dtype)
+        for i, j in pairs:
+            a, b, c = r[i] @ r[i], r[j] @ r[j], r[i] @ r[j]
+            turn = jnp.abs(c) > tiny  # already orthogonal: no rotation (and no 0 / 0)
+            size = jnp.maximum(jnp.sqrt(a) * jnp.sqrt(b), floor)
+            worst = jnp.maximum(worst, jnp.where(turn, jnp.abs(c) / jnp.where(turn, size, 1.0), 0.0))
+            zeta = (b - a) / (2.0 * jnp.where(turn, c, 1.0))
+            t = jnp.sign(zeta) / (jnp.abs(zeta) + jnp.hypot(1.0, zeta))  # the smaller root of t^2 + 2 zeta t = 1
+            t = jnp.where(turn, jnp.where(zeta == 0, 1.0, t), 0.0)
+            cs = 1.0 / jnp.sqrt(1.0 + t * t)
+            sn = cs * t
+            r[i], r[j] = cs * r[i] - sn * r[j], sn * r[i] + cs * r[j]
+            q[i], q[j] = cs * q[i] - sn * q[j], sn * q[i] + cs * q[j]
+        return tuple(r), tuple(q), n + 1, worst
+
+    def going(state):
+        return (state[2] < JACOBI_MAX_SWEEPS) & ~(state[3] <= tol)  # (NaN ends at the cap)
+
+    start = (tuple(R), tuple(eye), jnp.zeros((), jnp.int32), jnp.ones((), R.dtype))
+    r, q, _, _ = jax.lax.while_loop(going, sweep, start)
+    return jnp.stack(r), jnp.stack(q)
+
+
+@jax.custom_jvp
+def _row_norms_orthogonalised(R):
+    """The singular values of ``R`` (k, n), k <= n: the norms of :func:`_jacobi_rows`' rows, unsorted."""
+    W, _ = _jacobi_rows(R)
+    return jnp.sqrt(jnp.sum(W * W, axis=1))
+
+
+@_row_norms_orthogonalised.defjvp
+def _row_norms_orthogonalised_jvp(primals, tangents):
+    """``d sigma_i = u_i^T dR v_i`` with ``u_i`` row ``i`` of ``Q`` and ``v_i = W_i / sigma_i`` (JAX's
+    ``svd`` rule): finite where two values meet (no rotation angle is differentiated), 0 at a zero."""
+    (R,), (dR,) = primals, tangents
+    W, Q = _jacobi_rows(R)
+    s = jnp.sqrt(jnp.sum(W * W, axis=1))
+    pos = s > 0
+    ds = jnp.einsum("ki,ij,kj->k", Q, dR, W) / jnp.where(pos, s, 1.0)
+    return s, jnp.where(pos, ds, 0.0)
+
+
+def singular_values(A):
+    """The singular values of a small matrix ``A`` (m, n), descending (``min(m, n)``): those of
+    ``jnp.linalg.svd(A, compute_uv=False)`` to rounding. Up to :data:`JACOBI_MAX_ROWS` rows of ``A``
+    or ``A^T`` (whichever has fewer) by one-sided Jacobi (:func:`_jacobi_rows`), beyond by LAPACK;
+    the derivative is finite where two values meet."""
+    k = min(A.shape)
+    if k > JACOBI_MAX_ROWS:
+        return jnp.linalg.svd(A, compute_uv=False)
+    s = _row_norms_orthogonalised(A if A.shape[0] <= A.shape[1] else A.T)
+    if k == 3:  # a sorting network: three elementwise minima and maxima
+        hi, lo = jnp.maximum(s[0], s[1]), jnp.minimum(s[0], s[1])
+        return jnp.stack([jnp.maximum(hi, s[2]), jnp.maximum(lo, jnp.minimum(hi, s[2])), jnp.minimum(lo, s[2])])
+    return -jnp.sort(-s)

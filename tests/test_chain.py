@@ -13,8 +13,9 @@ from reference_chain import compliance as compliance_reference
 from reference_chain import measures
 
 import tension_zones as tz
+from tension_zones._numerics import singular_values
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
-from tension_zones.analysis._chain import BOX_VERTICES_MAX, _face_edges_max_sq, singular_values3
+from tension_zones.analysis._chain import BOX_VERTICES_MAX, _face_edges_max_sq
 from tension_zones.model import Robot
 from tension_zones.model._chain_statics import config_compliance
 from tension_zones.model._chain_zones import crossing_wires, segment_tension_map
@@ -146,39 +147,38 @@ def test_the_face_edges_ends_reach_the_largest_vertex(G):
 
 
 @st.composite
-def blocks(draw):
-    n = draw(st.integers(1, 12))
-    J = np.array(draw(st.lists(st.floats(-3, 3), min_size=3 * n, max_size=3 * n))).reshape(3, n)
-    kind = draw(st.sampled_from(["any", "zero row", "rank one", "near rank two", "equal"]))
+def small_matrices(draw):
+    m, n = draw(st.integers(1, 8)), draw(st.integers(1, 12))
+    A = np.array(draw(st.lists(st.floats(-3, 3), min_size=m * n, max_size=m * n))).reshape(m, n)
+    kind = draw(st.sampled_from(["any", "zero row", "rank one", "near rank deficient", "equal"]))
     if kind == "zero row":
-        J[2] = 0.0
+        A[-1] = 0.0
     elif kind == "rank one":
-        J = np.outer([0.3, -1.0, 2.0], J[0])
-    elif kind == "near rank two":
-        J[2] = 0.4 * J[0] - J[1] + 1e-9 * J[2]
-    elif kind == "equal" and n >= 3:
-        J = np.zeros((3, n))
-        J[[0, 1, 2], [0, 1, 2]] = 2.0
-    return J * 10.0 ** draw(st.integers(-3, 3))
+        A = np.outer(np.linspace(-1.0, 2.0, m), A[0])
+    elif kind == "near rank deficient" and m >= 3:
+        A[-1] = 0.4 * A[0] - A[1] + 1e-9 * A[-1]
+    elif kind == "equal":
+        A = 2.0 * np.eye(m, n)
+    return A * 10.0 ** draw(st.integers(-3, 3))
 
 
-SINGULAR = jax.jit(jax.vmap(singular_values3))
-SINGULAR_JVP = jax.jit(lambda J, dJ: jax.jvp(singular_values3, (J,), (dJ,)))
+SINGULAR = jax.jit(jax.vmap(singular_values))
+SINGULAR_JVP = jax.jit(lambda A, dA: jax.jvp(singular_values, (A,), (dA,)))
 
 
-@given(blocks())
-def test_a_blocks_singular_values_are_numpys_and_their_derivatives_are_finite(J):
-    want = np.zeros(3)
-    want[: min(3, J.shape[1])] = np.linalg.svd(J, compute_uv=False)
-    got = np.asarray(SINGULAR(jnp.asarray(J)[None])[0])
+@given(small_matrices())
+def test_a_small_matrixs_singular_values_are_numpys_and_their_derivatives_are_finite(A):
+    """The chain's blocks (3, N) and the taut wires' directions (N, 2S) take these (either shape)."""
+    want = np.linalg.svd(A, compute_uv=False)
+    got = np.asarray(SINGULAR(jnp.asarray(A)[None])[0])
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-13 * max(want[0], 1e-300))
-    dJ = np.cos(np.arange(J.size)).reshape(J.shape)
-    _, tangent = SINGULAR_JVP(jnp.asarray(J), jnp.asarray(dJ))
+    dA = np.cos(np.arange(A.size)).reshape(A.shape)
+    _, tangent = SINGULAR_JVP(jnp.asarray(A), jnp.asarray(dA))
     assert np.all(np.isfinite(np.asarray(tangent)))
-    gap = np.min(np.abs(np.diff(want[: min(3, J.shape[1])]))) if J.shape[1] > 1 else np.inf
-    if J.shape[1] >= 3 and want[2] > 1e-6 * want[0] and gap > 1e-6 * want[0]:  # distinct: one derivative
-        h = 1e-7 * max(1.0, np.max(np.abs(J)))
-        fd = (np.linalg.svd(J + h * dJ, compute_uv=False) - np.linalg.svd(J - h * dJ, compute_uv=False)) / (2 * h)
+    gap = np.min(np.abs(np.diff(want)), initial=np.inf)
+    if want[-1] > 1e-6 * want[0] and gap > 1e-6 * want[0]:  # distinct and non-zero: one derivative
+        h = 1e-7 * max(1.0, np.max(np.abs(A)))
+        fd = (np.linalg.svd(A + h * dA, compute_uv=False) - np.linalg.svd(A - h * dA, compute_uv=False)) / (2 * h)
         np.testing.assert_allclose(np.asarray(tangent), fd, rtol=1e-5, atol=1e-6 * max(1.0, want[0]))
 
 

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import eps_of
+from .._numerics import eps_of, singular_values
 from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
@@ -125,71 +125,11 @@ def _rank_cap(robot: Robot) -> int:
     return min(3, 2 * robot.n_segments)
 
 
-#: Sweeps of the one-sided Jacobi method over a block's three rows: the off-diagonal part falls
-#: quadratically, to rounding after four on every test of ``tests/test_chain.py``; one more for margin.
-JACOBI_SWEEPS = 5
-
-
-def _rows_orthogonalised(J):
-    """One-sided Jacobi (Hestenes) on the three rows of ``J`` (3, N): plane rotations ``Q`` (3, 3),
-    orthogonal, such that the rows of ``W = Q J`` are orthogonal; their norms are ``J``'s singular
-    values, each to high relative accuracy. Elementwise over the rows, so that vmapped it fuses (a
-    batch of LAPACK calls costs more than the whole measure)."""
-    tiny = jnp.finfo(J.dtype).tiny
-
-    def rotate(i, j, r, q):
-        a, b, c = r[i] @ r[i], r[j] @ r[j], r[i] @ r[j]
-        turn = jnp.abs(c) > tiny  # already orthogonal: no rotation (and no 0 / 0)
-        zeta = (b - a) / (2.0 * jnp.where(turn, c, 1.0))
-        t = jnp.sign(zeta) / (jnp.abs(zeta) + jnp.hypot(1.0, zeta))  # the smaller root of t^2 + 2 zeta t = 1
-        t = jnp.where(turn, jnp.where(zeta == 0, 1.0, t), 0.0)
-        cs = 1.0 / jnp.sqrt(1.0 + t * t)
-        sn = cs * t
-        r = r.at[jnp.array([i, j])].set(jnp.stack([cs * r[i] - sn * r[j], sn * r[i] + cs * r[j]]))
-        q = q.at[jnp.array([i, j])].set(jnp.stack([cs * q[i] - sn * q[j], sn * q[i] + cs * q[j]]))
-        return r, q
-
-    def sweep(_, rq):
-        for i, j in ((0, 1), (0, 2), (1, 2)):
-            rq = rotate(i, j, *rq)
-        return rq
-
-    return jax.lax.fori_loop(0, JACOBI_SWEEPS, sweep, (J, jnp.eye(3, dtype=J.dtype)))
-
-
-@jax.custom_jvp
-def _row_singular_values(J):
-    """The singular values of ``J`` (3, N), one per row of :func:`_rows_orthogonalised`, unsorted."""
-    W, _ = _rows_orthogonalised(J)
-    return jnp.sqrt(jnp.sum(W * W, axis=1))
-
-
-@_row_singular_values.defjvp
-def _row_singular_values_jvp(primals, tangents):
-    """``d sigma_k = u_k^T dJ v_k`` with ``u_k`` row ``k`` of ``Q`` and ``v_k = W_k / sigma_k``, as
-    JAX's ``svd``; finite where two values meet (no rotation angle is differentiated), 0 at a zero
-    value."""
-    (J,), (dJ,) = primals, tangents
-    W, Q = _rows_orthogonalised(J)
-    s = jnp.sqrt(jnp.sum(W * W, axis=1))
-    pos = s > 0
-    ds = jnp.einsum("ki,ij,kj->k", Q, dJ, W) / jnp.where(pos, s, 1.0)
-    return s, jnp.where(pos, ds, 0.0)
-
-
-def singular_values3(J):
-    """The singular values of a (3, N) block, descending (3,): those of ``jnp.linalg.svd`` to
-    rounding, padded with zeros where ``N < 3``."""
-    a, b, c = _row_singular_values(J)
-    hi, lo = jnp.maximum(a, b), jnp.minimum(a, b)
-    return jnp.stack([jnp.maximum(hi, c), jnp.maximum(lo, jnp.minimum(hi, c)), jnp.minimum(lo, c)])
-
-
 def _singular(J, r: int, n_wires: int):
     """``(sigma_1, sigma_r, sigma_min_nz)`` of a (3, N) block: the largest, the ``r``-th and the smallest
     non-zero singular value among the first ``r`` (NumPy's rank rule ``max(3, N) eps sigma_1``).
     Singular values only (no vectors): the gradient is finite where two of them meet."""
-    s = singular_values3(J)
+    s = singular_values(J)
     s1 = s[0]
     rtol = max(3, n_wires) * eps_of(J)
     head = s[:r]

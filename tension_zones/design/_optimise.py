@@ -51,7 +51,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._numerics import compact_programs
+from .._numerics import compact_programs, singular_values
 from .._xla import fast_compile_options, shapes_key, stored_program
 from ..model._design import Design
 from ..model._robot import Robot, routing_matrix
@@ -445,7 +445,7 @@ def chain_spread(robot: Robot, B):
     :func:`spread` (the same rows turned by ``delta``)."""
     m = robot.tension_mask(B)
     U = routing_matrix(robot.route_angles, jnp.ones_like(robot.route_radii), robot.crosses)
-    return jnp.linalg.svd(U * m[:, None], compute_uv=False)[-1]
+    return singular_values(U * m[:, None])[-1]
 
 
 def _config_terms(robot: Robot, B, task: _ChainTask, with_defl: bool = True):
