@@ -182,8 +182,8 @@ def explore_designs(
 #: chunk's designs and results, with room).
 POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
 #: A robot's chunk holds about ``chunks.poses x (CONFIG_BYTES + CONFIG_BYTES_N3 x N^3)`` bytes for ``N``
-#: wires in all (the exact bound's pair terms; XLA's memory analysis, two and three segments of 3 to 8
-#: wires each, kept above it).
+#: wires in all (the exact bound's pair terms beyond ``BOX_VERTICES_MAX`` wires, less up to it; XLA's
+#: memory analysis, two and three segments of 3 to 8 wires each, kept above it).
 CONFIG_BYTES, CONFIG_BYTES_N3 = 4000, 30
 #: With a load, ``CONFIG_BYTES_STATICS x 2^N x N^2`` bytes more per configuration (the tensions' 2^N free
 #: sets, ``model.config_compliance``; XLA's memory analysis, 3+3 to 4+4+4 wires, at most 7.6, kept above).
@@ -212,8 +212,9 @@ MAX_CHUNKS = 100_000
 #: (measured from 3 to 16). The basis of the work estimate (:func:`work_seconds`), off CPUs none.
 RATE_KINEMATIC, RATE_LOADED, RATE_WIRES = 2e6, 6e5, 4
 #: Design-configurations per second of one CPU process for a robot of ``RATE_CHAIN_WIRES`` wires in all
-#: (benchmarks/README.md, "Robots": two segments of 3 + 3 wires); a configuration costs about
-#: ``(N / RATE_CHAIN_WIRES)^3`` times as much for ``N`` wires (the exact bound's pair terms, ``O(N^3)``).
+#: (benchmarks/README.md, "Robots": two segments of 3 + 3 wires); a configuration costs at most about
+#: ``(N / RATE_CHAIN_WIRES)^3`` times as much for ``N`` wires (the exact bound's pair terms, ``O(N^3)``;
+#: up to ``BOX_VERTICES_MAX`` wires the box's vertices, which cost less: the same table).
 RATE_CHAIN, RATE_CHAIN_WIRES = 5e4, 6
 #: The most computing an exploration takes with the resource checks on, in estimated seconds (a day).
 MAX_WORK_S = 86_400
