@@ -392,8 +392,6 @@ def _jacobi_rows(R):
     k = R.shape[0]
     pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
     tiny, tol = jnp.finfo(R.dtype).tiny, R.shape[1] * eps_of(R)  # a dot product's rounding
-    eye = jnp.eye(k, dtype=R.dtype)
-
     floor = tol * jnp.sum(R * R)  # rows at rounding's size (a zero singular value) point anywhere
 
     def sweep(state):
@@ -416,7 +414,7 @@ def _jacobi_rows(R):
     def going(state):
         return (state[2] < JACOBI_MAX_SWEEPS) & ~(state[3] <= tol)  # (NaN ends at the cap)
 
-    start = (tuple(R), tuple(eye), jnp.zeros((), jnp.int32), jnp.ones((), R.dtype))
+    start = (tuple(R), tuple(jnp.eye(k, dtype=R.dtype)), jnp.zeros((), jnp.int32), jnp.ones((), R.dtype))
     r, q, _, _ = jax.lax.while_loop(going, sweep, start)
     return jnp.stack(r), jnp.stack(q)
 

@@ -73,14 +73,14 @@ def _face_edges_max_sq(G):
     """:func:`zonotope_max_sq` over the ends of the zonotope's face edges, ``O(N^3)``.
 
     Every vertex is an end of an edge on a face. For each pair ``i < j`` of generators, with the face
-    normal ``w = g_i x g_j`` and the in-face direction ``t = w x g_i``, the candidates take the signs of ``g_k . (w + e s t + e^2 r g_i)`` for a
-    small ``e`` and ``s, r = +-1`` (ties, within ``PARALLEL_TOL`` eps, go to the next term): the ends
-    of the face's edges parallel to ``g_i``, on both sides. A face's edges along all but one of its
-    directions reach all its vertices, so ``i < j`` suffices (``i = j`` adds the ends of a zonotope
-    of one direction, a single taut wire); every candidate is a point of the
-    zonotope, so none can exceed the maximum. This holds for a flat zonotope or a segment (a straight
-    robot, one segment: every ``w`` is normal to the plane and the in-face terms decide) and for
-    parallel or zero generators.
+    normal ``w = g_i x g_j`` and the in-face direction ``t = w x g_i``, the candidates take the signs
+    of ``g_k . (w + e s t + e^2 r g_i)`` for a small ``e`` and ``s, r = +-1`` (ties, within
+    ``PARALLEL_TOL`` eps, go to the next term): the ends of the face's edges parallel to ``g_i``, on
+    both sides. A face's edges along all but one of its directions reach all its vertices, so
+    ``i < j`` suffices (``i = j`` adds the ends of a zonotope of one direction, a single taut wire);
+    every candidate is a point of the zonotope, so none can exceed the maximum. This holds for a flat
+    zonotope or a segment (a straight robot, one segment: every ``w`` is normal to the plane and the
+    in-face terms decide) and for parallel or zero generators.
 
     Written elementwise over the pairs (no batched matrix products), so that vmapped it fuses.
     """
