@@ -419,23 +419,32 @@ def _jacobi_rows(R):
     return jnp.stack(r), jnp.stack(q)
 
 
+def _scaled_jacobi(R):
+    """:func:`_jacobi_rows` of ``R / c``, ``c`` its largest entry's magnitude (squares neither underflow
+    nor overflow), and ``c``: ``W, Q, c`` with ``Q R = c W``."""
+    c = jnp.max(jnp.abs(R))
+    c = jnp.where(c > 0, c, 1.0)
+    W, Q = _jacobi_rows(R / c)
+    return W, Q, c
+
+
 @jax.custom_jvp
 def _row_norms_orthogonalised(R):
     """The singular values of ``R`` (k, n), k <= n: the norms of :func:`_jacobi_rows`' rows, unsorted."""
-    W, _ = _jacobi_rows(R)
-    return jnp.sqrt(jnp.sum(W * W, axis=1))
+    W, _, c = _scaled_jacobi(R)
+    return c * jnp.sqrt(jnp.sum(W * W, axis=1))
 
 
 @_row_norms_orthogonalised.defjvp
 def _row_norms_orthogonalised_jvp(primals, tangents):
-    """``d sigma_i = u_i^T dR v_i`` with ``u_i`` row ``i`` of ``Q`` and ``v_i = W_i / sigma_i`` (JAX's
+    """``d sigma_i = u_i^T dR v_i`` with ``u_i`` row ``i`` of ``Q`` and ``v_i = W_i / |W_i|`` (JAX's
     ``svd`` rule): finite where two values meet (no rotation angle is differentiated), 0 at a zero."""
     (R,), (dR,) = primals, tangents
-    W, Q = _jacobi_rows(R)
-    s = jnp.sqrt(jnp.sum(W * W, axis=1))
-    pos = s > 0
-    ds = jnp.einsum("ki,ij,kj->k", Q, dR, W) / jnp.where(pos, s, 1.0)
-    return s, jnp.where(pos, ds, 0.0)
+    W, Q, c = _scaled_jacobi(R)
+    n = jnp.sqrt(jnp.sum(W * W, axis=1))
+    pos = n > 0
+    ds = jnp.einsum("ki,ij,kj->k", Q, dR, W) / jnp.where(pos, n, 1.0)
+    return c * n, jnp.where(pos, ds, 0.0)
 
 
 def singular_values(A):
