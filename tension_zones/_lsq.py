@@ -170,13 +170,18 @@ def _as_rows(fun, th, s):
     return (r[:, None] if r.ndim == 1 else r), s
 
 
-def _res_jac(pr: _Problem, th, s):
-    """Residuals (M, d), Jacobian columns (M, d, K) and warm state at ``th``: the model linearised once
-    (traced and compiled once, its primal run once), then pushed forward a group of columns at a
-    time, only the groups that hold the wanted ones (a loop with a traced count: the column count is
-    data, not shape); the state is the primal's."""
+def _linearise(pr: _Problem, th, s):
+    """Residuals (M, d) at ``th``, the model linearised there (traced and compiled once, its primal run
+    once) and the warm state: the primal's."""
     s = jax.lax.stop_gradient(s)
-    r, lin, s = jax.linearize(lambda t: pr.res(t, s), th, has_aux=True)
+    return jax.linearize(lambda t: pr.res(t, s), th, has_aux=True)
+
+
+def _jacobian(pr: _Problem, r, lin, groups):
+    """The Jacobian's columns (M, d, K) from the linearised model ``lin``: pushed forward a group of
+    columns at a time, the first ``groups`` groups (a loop with a traced count: the column count is
+    data, not shape; 0 for a candidate the cost test rejects, whose Jacobian is never used), the others
+    left 0."""
 
     def group(j, J):
         V = jax.lax.dynamic_slice_in_dim(pr.basis, j * COL_GROUP, COL_GROUP)  # (G, P)
@@ -184,7 +189,7 @@ def _res_jac(pr: _Problem, th, s):
             J, jnp.moveaxis(jax.vmap(lin)(V), 0, -1), j * COL_GROUP, axis=J.ndim - 1
         )
 
-    return r, jax.lax.fori_loop(0, pr.groups, group, jnp.zeros(r.shape + (pr.cols.shape[0],), r.dtype)), s
+    return jax.lax.fori_loop(0, groups, group, jnp.zeros(r.shape + (pr.cols.shape[0],), r.dtype))
 
 
 def _propose(pr: _Problem, th, r, J, lam):
@@ -226,12 +231,14 @@ def _init(pr: _Problem, theta0, warm) -> _State:
 
 def _step(pr: _Problem, st: _State) -> _State:
     """One pass, one model evaluation: evaluate the candidate, accept it if it lowers the cost (the
-    first pass always does), adapt the damping, propose the next candidate."""
+    first pass always does) and only then differentiate it, adapt the damping, propose the next
+    candidate."""
     th, r, J, cost, cand, lam, it, _, s = st
-    r_c, J_c, s_c = _res_jac(pr, cand, s)
+    r_c, lin, s_c = _linearise(pr, cand, s)
     cost_c = huber_cost(r_c, pr.w, pr.huber)
     ok = cost_c < cost
     ok = ok | (it == 0)
+    J_c = _jacobian(pr, r_c, lin, jnp.where(ok, pr.groups, 0))  # a rejected candidate's is not needed
     rel = (cost - cost_c) / jnp.maximum(jnp.abs(cost), 1e-300)
     done = (ok & (it > 0) & (rel < pr.tol)) | (lam > 1e12)
     th, r, J = (jnp.where(ok, a, b) for a, b in ((cand, th), (r_c, r), (J_c, J)))
