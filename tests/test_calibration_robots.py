@@ -26,6 +26,7 @@ EFFECTS = {
     "wire_angle_offset": RobotTruth(angle_offsets_deg=(4.0, -3.0, 2.0, -5.0, 3.0, 0.0, 4.0)),
     "wire_stiffness": RobotTruth(stiffness_factors=(0.5, 1.0, 1.6, 1.0, 0.6, 1.4, 1.0)),
     "preload": RobotTruth(d_preload=(6.0, -3.0, 0.0, 4.0, 0.0, -5.0, 2.0)),
+    "pretension": RobotTruth(d_preload=(6.0, 6.0, 6.0, -5.0, -5.0, -5.0, -5.0)),  # one per segment
     "tip_force": RobotTruth(tip_force=(0.3, -0.2, -0.4)),
     "gravity": RobotTruth(gravity=(0.0, 0.002, -0.003)),
     "marker": RobotTruth(marker=(3.0, -2.0, 4.0)),

@@ -18,6 +18,7 @@ from .marker import Marker
 from .offset import Offset
 from .pattern_rotation import PatternRotation
 from .preload import Preload
+from .pretension import Pretension
 from .registration import Registration
 from .routing_twist import RoutingTwist
 from .tip_force import TipForce
@@ -37,6 +38,7 @@ ALL = (
     RoutingTwist(),
     WireStiffness(),
     Preload(),
+    Pretension(),
     TipForce(),
     Gravity(),
     VariableCurvature(),
@@ -96,6 +98,7 @@ __all__ = [
     "Offset",
     "PatternRotation",
     "Preload",
+    "Pretension",
     "Registration",
     "RoutingTwist",
     "TipForce",
