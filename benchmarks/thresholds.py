@@ -41,6 +41,7 @@ ONE = [
     ("wire_angle_offset", Truth(angle_offsets_deg=(4.0, -3.0, 5.0)), {"wire_angle_offset"}),
     ("wire_stiffness", Truth(stiffness_factors=(0.6, 1.0, 1.5)), {"wire_stiffness"}),
     ("preload", Truth(d_preload=(3.0, -1.5, 0.0)), {"preload"}),
+    ("pretension", Truth(d_preload=(2.0, 2.0, 2.0)), {"pretension"}),
     ("tip_force", Truth(tip_force=(0.3, -0.4, -0.8)), {"tip_force"}),
     ("registration", Truth(rotation_deg=(1.0, -0.8, 1.5), translation=(0.4, -0.3, 0.5)), {"registration"}),
     ("geometry", Truth(d_length=0.4, d_radius=0.15), {"geometry"}),
@@ -62,6 +63,7 @@ ONE = [
 MANY = [
     ("robot backlash", RobotTruth(play=(0.3, 0.2, 0.4, 0.25, 0.3, 0.2, 0.35)), {"backlash"}),
     ("robot preload", RobotTruth(d_preload=(6.0, -3.0, 0.0, 4.0, 0.0, -5.0, 2.0)), {"preload"}),
+    ("robot pretension", RobotTruth(d_preload=(6.0, 6.0, 6.0, -5.0, -5.0, -5.0, -5.0)), {"pretension"}),
     ("robot clearance", RobotTruth(clearance=(0.1, 0.3)), {"clearance"}),
     ("robot marker", RobotTruth(marker=(3.0, -2.0, 4.0)), {"marker"}),
     (

@@ -67,6 +67,24 @@ def test_each_effect_alone_is_found(tmp_path, effect):
     assert not rep["unexplained_structure"]
 
 
+def test_one_preload_on_every_wire_is_named_pretension_its_special_case(tmp_path):
+    """A preload common to a segment's wires fits per wire as well as per segment; the per-wire
+    effect's two extra parameters buy no significant drop over its special case, so the pretension is
+    named, and the round says why (on this set the per-wire refit is the lower by a hair)."""
+    from tension_zones.calibration._report import _md_round
+
+    rep = run(tmp_path, "pretension", Truth(d_preload=(2.0, 2.0, 2.0)), seed=2)
+    assert names(rep) == ["pretension"]
+    rd = rep["rounds"][0]
+    nested = rd["nested"]
+    assert (nested["kept"], nested["over"], nested["extra"]) == ("pretension", "preload", 2)
+    assert nested["sse_drop"] < nested["needed"]
+    tried = {t["name"]: t for t in rd["tried"]}
+    assert tried["preload"]["rmse_held_out_mm"] <= tried["pretension"]["rmse_held_out_mm"]
+    assert rep["rmse_after_mm"] < 1.3 * rep["noise_floor_mm"] and not rep["unexplained_structure"]
+    assert any("pretension is a special case of preload" in line for line in _md_round(rep, rd))
+
+
 def test_the_final_refit_takes_every_sample_of_the_data_file_and_nothing_of_the_validation_file(tmp_path):
     """The held-out errors are the training part's fit's (out of sample); the chosen model is then
     refitted on every sample of the data file, which gives the parameters and the validation error;

@@ -78,7 +78,7 @@ from ._fits import Fits, Runner, glitch_weights, rmse, worker_count
 from ._model import RobotModel, data_clock
 from ._problem import Problem, correlations, parameter_std, physical
 from ._register import GlobalRegistration, global_registration, kabsch, rotation_vector
-from ._rounds import Added, BranchEnd, JointLook, LookAhead, Refit, Removal, Round, Score
+from ._rounds import Added, BranchEnd, JointLook, LookAhead, Nested, Refit, Removal, Round, Score
 from .effects import library as default_library
 from .effects import nominal as default_nominal
 
@@ -340,7 +340,10 @@ class _Loop:
         tried = self.refit(st, chosen, r)
         m, unit = self.m, self.unit_of(st.err)
         good = sorted((t for t in tried if t.significant), key=lambda t: t.err)
-        info = Round(round=st.rnd, z_critical=z_crit, rmse_held_out_mm=st.plain, rmse_train_mm=rmse(r[self.train]))
+        good, nested = self.simplest(good, unit)
+        info = Round(
+            round=st.rnd, z_critical=z_crit, rmse_held_out_mm=st.plain, rmse_train_mm=rmse(r[self.train]), nested=nested
+        )
         short = sorted((t for t in tried if t.short_of_share), key=lambda t: t.err)
         if not good and short:  # the joint look may go on from here (step 4)
             st.shortfall = _Fork(copy.deepcopy(st), copy.deepcopy(tried), short[0].name, info)
@@ -348,6 +351,22 @@ class _Loop:
             # the test cannot tell the two apart: the look-ahead may go on from the runner-up
             ties.append(_Fork(copy.deepcopy(st), copy.deepcopy(tried), good[1].name, info))
         return self.keep(st, tried, good[0] if good else None, info)
+
+    def simplest(self, good: list[Refit], unit: float) -> tuple[list[Refit], Nested | None]:
+        """``good`` (significant refits, lowest error first) with a special case of the best first
+        where the best's extra parameters do not buy a significant drop over it (a nested chi-square
+        test at the loop's level), and the record of that choice (None where the order stands)."""
+        if not good:
+            return good, None
+        best = good[0]
+        for t in good[1:]:
+            if self.blocks[t.name].special_case_of != best.name:
+                continue
+            extra = _size(self.sl[best.name]) - _size(self.sl[t.name])
+            drop, need = (t.err**2 - best.err**2) * self.m / unit, chi2_quantile(self.alpha, max(extra, 1))
+            if drop < need:
+                return [t] + [g for g in good if g is not t], Nested(t.name, best.name, drop, need, extra)
+        return good, None
 
     def score(self, st: _Branch) -> tuple | None:
         """The score test of every candidate not in ``st``'s model on its held-out residual. Returns the
@@ -391,9 +410,7 @@ class _Loop:
             explained = math.sqrt(max(s["explained_mm2"], 0.0))
             scores.append(Score(round=rnd, name=name, score=s["score"], dof=s["dof"], explained_rmse_mm=explained))
         scores.sort(key=lambda c: -c.score)
-        scores += [
-            Score(rnd, n, 0.0, int(sl[n].stop - sl[n].start), 0.0, not_scored="the model has no load") for n in idle
-        ]
+        scores += [Score(rnd, n, 0.0, _size(sl[n]), 0.0, not_scored="the model has no load") for n in idle]
         z_crit = _norm_isf(self.alpha / max(len(remaining) + len(idle), 1))  # every candidate of the round
         self.say(f"round {rnd}: " + ", ".join(f"{s.name} {s.score:.1f}" for s in scores))
         return scores, r, z_crit
@@ -517,7 +534,7 @@ class _Loop:
             jobs = [(_reset(st.theta, sl[e], self.pb.null), [a for a in st.active if a != e]) for e in earlier]
             for e, (_, rest), (th_wo, plain_wo, err_wo) in zip(earlier, jobs, self.run.map("refit_held_only", jobs)):
                 rise = (err_wo**2 - st.err**2) * self.m / self.unit_of(st.err)
-                need = chi2_quantile(self.alpha, int(sl[e].stop - sl[e].start))
+                need = chi2_quantile(self.alpha, _size(sl[e]))
                 self.say(f"  without {e}: held-out {plain_wo:.4f} mm (rise {rise:.1f}, needed {need:.1f})")
                 if rise < need:
                     st.theta, st.err, st.plain, st.active = th_wo, err_wo, plain_wo, rest
@@ -909,6 +926,10 @@ def calibrate(
         ):
             st, end = cx.joint_look(st, end)  # the joint look (step 4)
         return _result(cx, pp, start, st, end, holdout, t0)
+
+
+def _size(block: slice) -> int:
+    return int(block.stop - block.start)
 
 
 def _screened(s: Score, rmse_mm: float, drop: float, alpha: float) -> Score:

@@ -312,6 +312,24 @@ def _md_evidence(report: dict) -> list[str]:
     return lines
 
 
+def _verdict(t: dict, la: dict | None, jl: dict | None, nst: dict | None) -> str:
+    """What the round decided on the refit ``t`` (its look-ahead, joint look and nested choice)."""
+    verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"] else "not significant")
+    if t.get("short_of_share"):
+        verdict = (
+            f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
+            f"short of the {t['share_needed']:.1%} one effect needs"
+            + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else "")
+        )
+    elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
+        verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
+    if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
+        verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
+    if nst and t["name"] == nst["over"]:
+        verdict = f"significant, the lowest, but no significant drop over {nst['kept']} (below)"
+    return verdict
+
+
 def _md_round(report: dict, rd: dict) -> list[str]:
     """One round: its scores, short refits, refits and their verdicts, look-ahead, joint look and
     backward step."""
@@ -343,19 +361,9 @@ def _md_round(report: dict, rd: dict) -> list[str]:
                 for c in screened
             )
         )
-    la, jl = rd.get("look_ahead"), rd.get("joint_look")
+    la, jl, nst = rd.get("look_ahead"), rd.get("joint_look"), rd.get("nested")
     for t in rd["tried"]:
-        verdict = "kept" if t["accepted"] else ("significant, not the best" if t["significant"] else "not significant")
-        if t.get("short_of_share"):
-            verdict = (
-                f"significant, but {t['share_held_out']:.1%} of the held-out excess over the noise floor, "
-                f"short of the {t['share_needed']:.1%} one effect needs"
-                + (": the joint look goes on from it (below)" if jl and jl["first"] == t["name"] else "")
-            )
-        elif t["accepted"] and t.get("share_needed", 1.0) == 0.0:
-            verdict = f"kept on the joint look ({t['share_held_out']:.1%} of the excess; no share of its own needed)"
-        if la and not t["accepted"] and t["name"] == la["branches"][0]["first"]:
-            verdict = "significant, the lowest, but its branch ended higher (look-ahead, below)"
+        verdict = _verdict(t, la, jl, nst)
         lines.append(
             f"- refit with {t['name']}: held-out RMSE {t['rmse_held_out_mm']:.4f} mm, drop of "
             f"the held-out sum of squares {t['sse_drop']:.1f} residual variances (needed "
@@ -367,6 +375,12 @@ def _md_round(report: dict, rd: dict) -> list[str]:
                 else ""
             )
             + f" -> {verdict}"
+        )
+    if nst:
+        lines.append(
+            f"- {nst['kept']} is a special case of {nst['over']}: {nst['over']}'s drop over it, "
+            f"{nst['sse_drop']:.1f} residual variances, is short of the {nst['needed']:.1f} its "
+            f"{nst['extra']} more parameters need -> **{nst['kept']}**"
         )
     if la:
         a, b = la["branches"]

@@ -195,6 +195,22 @@ class JointLook:
 
 
 @dataclasses.dataclass(frozen=True)
+class Nested:
+    """A round's lowest refit ``over`` passed over for ``kept``, a special case of it: the drop of the
+    larger over the smaller, in units of the residual's variance, short of the chi-square quantile
+    for its extra parameters."""
+
+    kept: str
+    over: str
+    sse_drop: float
+    needed: float
+    extra: int  # the larger effect's extra parameters
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(frozen=True)
 class Round:
     """One round of the loop: the model's errors at its start, the refits tried, the effect kept (or
     None) and removed, and a look-ahead or joint look that went on from it."""
@@ -208,6 +224,7 @@ class Round:
     removed: tuple[Removal, ...] = ()
     look_ahead: LookAhead | None = None
     joint_look: JointLook | None = None
+    nested: Nested | None = None
 
     def to_dict(self) -> dict:
         out = {
@@ -223,4 +240,6 @@ class Round:
             out["look_ahead"] = self.look_ahead.to_dict()
         if self.joint_look is not None:
             out["joint_look"] = self.joint_look.to_dict()
+        if self.nested is not None:
+            out["nested"] = self.nested.to_dict()
         return out

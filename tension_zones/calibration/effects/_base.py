@@ -18,6 +18,7 @@ overlap another's, e.g. per-wire angles and a per-segment rotation of the patter
 from __future__ import annotations
 
 import dataclasses
+from typing import ClassVar
 
 import jax.numpy as jnp
 import numpy as np
@@ -43,6 +44,10 @@ class Effect:
     #: predict the recording's later samples when fitted on its earlier ones (``Fits.later``), since
     #: held-out groups interleaved with its training samples only test an interpolation
     of_time = False
+    #: The name of an effect whose parameters include this one's as a special case (a per-segment
+    #: value of a per-wire one): where both refits pass, the larger is kept only if its extra
+    #: parameters buy a significant drop over this one (a nested chi-square test, ``_loop``)
+    special_case_of: ClassVar[str | None] = None
 
     # -- parameters (concrete NumPy, from the model and its declared physical parameters) ----------
     def size(self, model, phys0) -> int:

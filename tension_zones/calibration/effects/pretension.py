@@ -20,6 +20,7 @@ from ._base import Effect, per_owner, replace, segment_labels
 class Pretension(Effect):
     name = "pretension"
     doc = "one preload shared by each segment's wires (N), equivalently a common zero offset"
+    special_case_of = "preload"
 
     def size(self, model, phys0):
         return model.structure.n_segments
