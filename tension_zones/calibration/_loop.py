@@ -20,7 +20,10 @@ For any robot (one segment or many) and any reader:
    its sum of squares: an effect that barely improves the part it was fitted on but happens to
    improve the held-out part explains a coincidence, not the robot). Of those, the
    one with the lowest held-out error is kept (effects overlap: a registration explains
-   part of almost anything, the true effect all of it). Then a backward step: an earlier effect
+   part of almost anything, the true effect all of it), unless a special case of it passed too
+   (``Effect.special_case_of``: a per-segment pretension of the per-wire preload) and the larger's
+   drop over it is short of the chi-square quantile of its extra parameters: then the special case
+   (nested models; the extra parameters fit noise). Then a backward step: an earlier effect
    whose removal no longer raises the held-out error significantly (same test) was only standing in
    for the new one, and is removed.
 4. Repeat until no candidate helps (where no score is significant but the held-out error is more
