@@ -10,7 +10,8 @@ noise (the chi-square tests do that), so its value rests on generated data: sets
 undeclared effects, one and several segments, each library effect alone, pairs, none, and an
 effect outside the library (a tracker drift along the acquisition) at several amplitudes. Every
 refit that passed the other tests is labelled *true* (its effect is in the set) or *false*; the
-threshold must lie above what false effects explain and below what true ones do. Written into
+threshold must lie above what false effects explain and below what true ones do. The structure
+flag's ``EXCESS_RATIO`` likewise: above where complete models end, below where a drift leaves them. Written into
 ``benchmarks/README.md`` between the THRESHOLDS markers.
 """
 
@@ -30,7 +31,7 @@ from simulator import RobotTruth, Truth, write_robot_set, write_set
 
 import tension_zones as tz
 from tension_zones.calibration import calibrate, read_csv, read_opencr
-from tension_zones.calibration._loop import EXCESS_SCALE, SECOND_LOOK_SHARE
+from tension_zones.calibration._loop import EXCESS_RATIO, EXCESS_SCALE, SECOND_LOOK_SHARE, STRUCTURE_Z
 
 MIN_EXCESS = inspect.signature(calibrate).parameters["min_excess"].default
 
@@ -135,6 +136,30 @@ def _extreme(rows, fn):
     return f"{r['share'] / r['needed']:.2f} ({r['name']}, {r['set']}: {r['share']:.3f} of {r['needed']:.3f})"
 
 
+def _final_ratio(rep: dict) -> float:
+    return rep["rmse_after_mm"] / rep["noise_floor_mm"]
+
+
+def _excess_ratio(reports, wrong) -> str:
+    """The flag's ratio: above the final held-out error / floor of every complete model (a set named
+    exactly, its effects in the library), which must not be flagged; below it, structure from outside
+    the library is flagged only by its other tests."""
+    outside = {k: rep for k, (rep, truth) in reports.items() if "drift" in k}  # a tracker drift (the sets' names)
+    complete = {k: rep for k, (rep, truth) in reports.items() if k not in wrong and k not in outside}
+
+    def side(group, fn):
+        k = fn(group, key=lambda k: _final_ratio(group[k]))
+        flagged = sum(bool(r["unexplained_structure"]) for r in group.values())
+        return f"{fn.__name__} {_final_ratio(group[k]):.3f} ({k}), flagged {flagged} of {len(group)}"
+
+    return (
+        f"`EXCESS_RATIO` = {EXCESS_RATIO:g} (structure flagged where the final held-out RMSE is more than "
+        f"that many floors, with z > {STRUCTURE_Z:g}; or by the other structure tests). Final held-out / "
+        f"floor: sets named exactly, nothing outside the library: {side(complete, max)}; a drift outside it: "
+        f"{side(outside, min)}."
+    )
+
+
 def markdown(rows, reports, seeds) -> str:
     """Two sides of the share test: refits of an effect that is in the set must explain more than it
     needs (smallest share / needed), refits on sets whose structure is outside the library (only
@@ -162,6 +187,7 @@ def markdown(rows, reports, seeds) -> str:
     wrong = {
         label: (rep, truth) for label, (rep, truth) in reports.items() if {e["name"] for e in rep["effects"]} != truth
     }
+    lines += ["", _excess_ratio(reports, wrong)]
     lines += [
         "",
         (

@@ -87,7 +87,9 @@ from .effects import nominal as default_nominal
 
 #: Structure left is claimed when a feature's permutation z-value (or the offset's) exceeds this.
 STRUCTURE_Z = 4.0
-#: ... or when the held-out RMSE exceeds the noise floor by this factor with an F-type z > STRUCTURE_Z.
+#: ... or when the held-out RMSE exceeds the noise floor by this factor with an F-type z > STRUCTURE_Z:
+#: between where the generator's complete models end and where its sets with a tracker drift outside
+#: the library do (``benchmarks/thresholds.py``).
 EXCESS_RATIO = 1.15
 #: Significant candidates refitted fully per round; the lowest held-out error wins. Where more are
 #: significant, each first gets a short refit (``SCREEN_ITERATIONS``) and the best of those that
