@@ -169,8 +169,12 @@ def test_knife_edges_name_the_decision_and_the_other_side():
         ("joint look (geometry + preload)", "share of the excess"),
     ]
     assert edges[0]["other_side_rmse_mm"] == 3.4 and edges[1]["other_side_rmse_mm"] == 7.91
+    # a refit's other side is that round's; a joint look's is the loop's end
+    assert [e["other_side_at"] for e in edges] == ["round", "end"]
     lines = caveats({"knife_edges": edges, "bound_warnings": ["x"]})
     assert len(lines) == 3 and "0.2488 against 0.25" in lines[1] and "7.910 mm" in lines[1]
+    assert "the other side, at that round: held out 3.400 mm" in lines[0]
+    assert "the other side: held out 7.910 mm" in lines[1]
     assert bound_lines(
         ["backbone_EI.EI_1_Nmm2"], {"backbone_EI": {"EI_1_Nmm2": 9818.0}}, {"backbone_EI": {"EI_1_Nmm2": 490.9}}
     ) == ["backbone_EI.EI_1_Nmm2 at its bound (9818, 20x the declared 490.9): check the design file's value"]

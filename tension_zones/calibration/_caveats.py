@@ -23,7 +23,9 @@ def _near(value, threshold) -> bool:
 def knife_edges(rounds: list) -> list[dict]:
     """The loop's decisions (``report["rounds"]``) that fell within :data:`KNIFE_EDGE` of a threshold:
     ``{"round", "what", "test", "value", "threshold", "decided", "other_side_rmse_mm"}``, where
-    ``other_side_rmse_mm`` is the held-out RMSE the other decision would have given (at that round)."""
+    ``other_side_rmse_mm`` is the held-out RMSE the other decision would have given, and
+    ``other_side_at`` where: ``"round"``, at that round (a refit's; the rounds after it are not run
+    for the other side), or ``"end"``, the whole loop's (a joint look's or a look-ahead's)."""
     out = []
     for rd in rounds:
         best = min((t["rmse_held_out_mm"] for t in rd["tried"] if t["accepted"]), default=np.inf)
@@ -50,6 +52,7 @@ def knife_edges(rounds: list) -> list[dict]:
                             "threshold": float(threshold),
                             "decided": "kept" if kept else "not kept",
                             "other_side_rmse_mm": float(other),
+                            "other_side_at": "round",
                         }
                     )
         jl = rd.get("joint_look")
@@ -70,6 +73,7 @@ def knife_edges(rounds: list) -> list[dict]:
                             "other_side_rmse_mm": float(
                                 jl.get("rmse_before_mm", np.nan) if jl["kept"] else jl["rmse_held_out_mm"]
                             ),
+                            "other_side_at": "end",
                         }
                     )
         la = rd.get("look_ahead")
@@ -85,6 +89,7 @@ def knife_edges(rounds: list) -> list[dict]:
                     "threshold": float(la["needed"]),
                     "decided": f"{la['kept']} first",
                     "other_side_rmse_mm": float((b if kept_first else a)["rmse_held_out_mm"]),
+                    "other_side_at": "end",
                 }
             )
     return out
@@ -93,7 +98,8 @@ def knife_edges(rounds: list) -> list[dict]:
 def _edge_line(e: dict) -> str:
     return (
         f"knife edge in round {e['round']}: {e['what']}, {e['test']} {e['value']:.4g} against "
-        f"{e['threshold']:.4g} needed ({e['decided']}; the other side: held out "
+        f"{e['threshold']:.4g} needed ({e['decided']}; the other side"
+        f"{', at that round' if e.get('other_side_at') == 'round' else ''}: held out "
         f"{e['other_side_rmse_mm']:.3f} mm)"
     )
 
