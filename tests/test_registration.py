@@ -175,6 +175,16 @@ def test_knife_edges_name_the_decision_and_the_other_side():
     assert len(lines) == 3 and "0.2488 against 0.25" in lines[1] and "7.910 mm" in lines[1]
     assert "the other side, at that round: held out 3.400 mm" in lines[0]
     assert "the other side: held out 7.910 mm" in lines[1]
+    # a special case kept over the effect that holds it by a hair: the larger's refit is the other side
+    nested = {"kept": "pretension", "over": "preload", "sse_drop": 13.5, "needed": 13.8, "extra": 6}
+    tried = [{"name": "preload", "accepted": False, "significant": True, "sse_drop": 90.0, "needed": 22.5,
+              "sse_drop_train": 80.0, "rmse_held_out_mm": 4.87},
+             {"name": "pretension", "accepted": True, "significant": True, "sse_drop": 76.5, "needed": 11.2,
+              "sse_drop_train": 70.0, "rmse_held_out_mm": 4.99}]  # fmt: skip
+    edges = knife_edges([{"round": 1, "rmse_held_out_mm": 5.56, "tried": tried, "nested": nested}])
+    assert [(e["what"], e["other_side_rmse_mm"], e["other_side_at"]) for e in edges] == [
+        ("pretension as a special case of preload", 4.87, "round")
+    ]
     assert bound_lines(
         ["backbone_EI.EI_1_Nmm2"], {"backbone_EI": {"EI_1_Nmm2": 9818.0}}, {"backbone_EI": {"EI_1_Nmm2": 490.9}}
     ) == ["backbone_EI.EI_1_Nmm2 at its bound (9818, 20x the declared 490.9): check the design file's value"]

@@ -76,6 +76,21 @@ def knife_edges(rounds: list) -> list[dict]:
                             "other_side_at": "end",
                         }
                     )
+        nst = rd.get("nested")
+        if nst and _near(nst["sse_drop"], nst["needed"]):
+            over = next(t for t in rd["tried"] if t["name"] == nst["over"])
+            out.append(
+                {
+                    "round": rd["round"],
+                    "what": f"{nst['kept']} as a special case of {nst['over']}",
+                    "test": "drop of the larger over it",
+                    "value": float(nst["sse_drop"]),
+                    "threshold": float(nst["needed"]),
+                    "decided": f"{nst['kept']} kept",
+                    "other_side_rmse_mm": float(over["rmse_held_out_mm"]),
+                    "other_side_at": "round",
+                }
+            )
         la = rd.get("look_ahead")
         if la and "sse_drop" in la and _near(la["sse_drop"], la["needed"]):
             a, b = la["branches"]
