@@ -141,9 +141,9 @@ def _final_ratio(rep: dict) -> float:
 
 
 def _excess_ratio(reports, wrong) -> str:
-    """The flag's ratio: above the final held-out error / floor of every complete model (a set named
-    exactly, its effects in the library), which must not be flagged; below it, structure from outside
-    the library is flagged only by its other tests."""
+    """The flag's ratio must lie above the final held-out error / floor of every complete model (a set
+    named exactly, nothing outside the library: none may be flagged) and below that of the sets with a
+    tracker drift outside the library (all should be)."""
     outside = {k: rep for k, (rep, truth) in reports.items() if "drift" in k}  # a tracker drift (the sets' names)
     complete = {k: rep for k, (rep, truth) in reports.items() if k not in wrong and k not in outside}
 

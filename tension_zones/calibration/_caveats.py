@@ -22,92 +22,86 @@ def _near(value, threshold) -> bool:
 
 def knife_edges(rounds: list) -> list[dict]:
     """The loop's decisions (``report["rounds"]``) that fell within :data:`KNIFE_EDGE` of a threshold:
-    ``{"round", "what", "test", "value", "threshold", "decided", "other_side_rmse_mm"}``, where
-    ``other_side_rmse_mm`` is the held-out RMSE the other decision would have given, and
+    ``{"round", "what", "test", "value", "threshold", "decided", "other_side_rmse_mm", "other_side_at"}``,
+    where ``other_side_rmse_mm`` is the held-out RMSE the other decision would have given, and
     ``other_side_at`` where: ``"round"``, at that round (a refit's; the rounds after it are not run
     for the other side), or ``"end"``, the whole loop's (a joint look's or a look-ahead's)."""
+    return [e for rd in rounds for kind in (_refit_edges, _joint_edges, _nested_edges, _ahead_edges) for e in kind(rd)]
+
+
+def _edge(rd: dict, what: str, test: str, value, threshold, decided: str, other, at: str) -> dict:
+    return {
+        "round": rd["round"],
+        "what": what,
+        "test": test,
+        "value": float(value),
+        "threshold": float(threshold),
+        "decided": decided,
+        "other_side_rmse_mm": float(other),
+        "other_side_at": at,
+    }
+
+
+def _refit_edges(rd: dict) -> list[dict]:
+    """A round's refits whose tests fell near their thresholds, where crossing one changes the model."""
     out = []
-    for rd in rounds:
-        best = min((t["rmse_held_out_mm"] for t in rd["tried"] if t["accepted"]), default=np.inf)
-        for t in rd["tried"]:
-            if not t["accepted"] and (t["significant"] or t["rmse_held_out_mm"] >= best):
-                continue  # a better refit was kept: crossing this one's edge changes nothing
-            kept = bool(t["accepted"])
-            other = rd["rmse_held_out_mm"] if kept else t["rmse_held_out_mm"]
-            tests = [
-                ("held-out drop", t["sse_drop"], t["needed"]),
-                ("training drop", t.get("sse_drop_train", np.inf), t["needed"]),
-                ("later samples' drop", t.get("sse_drop_later", np.inf), t["needed"]),
-                ("share of the excess", t.get("share_held_out", 0.0), t.get("share_needed", 0.0)),
-            ]
-            for test, value, threshold in tests:
-                # an edge decides only where the refit's other tests passed (or it was kept)
-                if _near(value, threshold) and (kept or t.get("short_of_share") or test != "share of the excess"):
-                    out.append(
-                        {
-                            "round": rd["round"],
-                            "what": f"refit with {t['name']}",
-                            "test": test,
-                            "value": float(value),
-                            "threshold": float(threshold),
-                            "decided": "kept" if kept else "not kept",
-                            "other_side_rmse_mm": float(other),
-                            "other_side_at": "round",
-                        }
-                    )
-        jl = rd.get("joint_look")
-        if jl:
-            for test, value, threshold in (
-                ("share of the excess", jl["share_held_out"], jl["share_needed"]),
-                ("held-out drop", jl["sse_drop"], jl["needed"]),
-            ):
-                if _near(value, threshold):
-                    out.append(
-                        {
-                            "round": rd["round"],
-                            "what": "joint look (" + " + ".join(jl["added"]) + ")",
-                            "test": test,
-                            "value": float(value),
-                            "threshold": float(threshold),
-                            "decided": "kept" if jl["kept"] else "not kept",
-                            "other_side_rmse_mm": float(
-                                jl.get("rmse_before_mm", np.nan) if jl["kept"] else jl["rmse_held_out_mm"]
-                            ),
-                            "other_side_at": "end",
-                        }
-                    )
-        nst = rd.get("nested")
-        if nst and _near(nst["sse_drop"], nst["needed"]):
-            over = next(t for t in rd["tried"] if t["name"] == nst["over"])
-            out.append(
-                {
-                    "round": rd["round"],
-                    "what": f"{nst['kept']} as a special case of {nst['over']}",
-                    "test": "drop of the larger over it",
-                    "value": float(nst["sse_drop"]),
-                    "threshold": float(nst["needed"]),
-                    "decided": f"{nst['kept']} kept",
-                    "other_side_rmse_mm": float(over["rmse_held_out_mm"]),
-                    "other_side_at": "round",
-                }
-            )
-        la = rd.get("look_ahead")
-        if la and "sse_drop" in la and _near(la["sse_drop"], la["needed"]):
-            a, b = la["branches"]
-            kept_first = la["kept"] == a["first"]
-            out.append(
-                {
-                    "round": rd["round"],
-                    "what": f"look-ahead ({a['first']} or {b['first']} first)",
-                    "test": "held-out drop",
-                    "value": float(la["sse_drop"]),
-                    "threshold": float(la["needed"]),
-                    "decided": f"{la['kept']} first",
-                    "other_side_rmse_mm": float((b if kept_first else a)["rmse_held_out_mm"]),
-                    "other_side_at": "end",
-                }
-            )
+    best = min((t["rmse_held_out_mm"] for t in rd["tried"] if t["accepted"]), default=np.inf)
+    for t in rd["tried"]:
+        if not t["accepted"] and (t["significant"] or t["rmse_held_out_mm"] >= best):
+            continue  # a better refit was kept: crossing this one's edge changes nothing
+        kept = bool(t["accepted"])
+        other = rd["rmse_held_out_mm"] if kept else t["rmse_held_out_mm"]
+        tests = [
+            ("held-out drop", t["sse_drop"], t["needed"]),
+            ("training drop", t.get("sse_drop_train", np.inf), t["needed"]),
+            ("later samples' drop", t.get("sse_drop_later", np.inf), t["needed"]),
+            ("share of the excess", t.get("share_held_out", 0.0), t.get("share_needed", 0.0)),
+        ]
+        for test, value, threshold in tests:
+            # an edge decides only where the refit's other tests passed (or it was kept)
+            if _near(value, threshold) and (kept or t.get("short_of_share") or test != "share of the excess"):
+                decided = "kept" if kept else "not kept"
+                out.append(_edge(rd, f"refit with {t['name']}", test, value, threshold, decided, other, "round"))
     return out
+
+
+def _joint_edges(rd: dict) -> list[dict]:
+    jl = rd.get("joint_look")
+    if not jl:
+        return []
+    what, decided = "joint look (" + " + ".join(jl["added"]) + ")", "kept" if jl["kept"] else "not kept"
+    other = jl.get("rmse_before_mm", np.nan) if jl["kept"] else jl["rmse_held_out_mm"]
+    return [
+        _edge(rd, what, test, value, threshold, decided, other, "end")
+        for test, value, threshold in (
+            ("share of the excess", jl["share_held_out"], jl["share_needed"]),
+            ("held-out drop", jl["sse_drop"], jl["needed"]),
+        )
+        if _near(value, threshold)
+    ]
+
+
+def _nested_edges(rd: dict) -> list[dict]:
+    nst = rd.get("nested")
+    if not nst or not _near(nst["sse_drop"], nst["needed"]):
+        return []
+    over = next(t for t in rd["tried"] if t["name"] == nst["over"])
+    what = f"{nst['kept']} as a special case of {nst['over']}"
+    decided = f"{nst['kept']} kept"
+    return [
+        _edge(rd, what, "drop of the larger over it", nst["sse_drop"], nst["needed"], decided,
+              over["rmse_held_out_mm"], "round")
+    ]  # fmt: skip
+
+
+def _ahead_edges(rd: dict) -> list[dict]:
+    la = rd.get("look_ahead")
+    if not la or "sse_drop" not in la or not _near(la["sse_drop"], la["needed"]):
+        return []
+    a, b = la["branches"]
+    other = (b if la["kept"] == a["first"] else a)["rmse_held_out_mm"]
+    what = f"look-ahead ({a['first']} or {b['first']} first)"
+    return [_edge(rd, what, "held-out drop", la["sse_drop"], la["needed"], f"{la['kept']} first", other, "end")]
 
 
 def _edge_line(e: dict) -> str:
