@@ -607,7 +607,7 @@ def bench_bounds(quick):
 
     rng = np.random.default_rng(0)
     out = []
-    for n in (6, 9, 10, 11, 12, 13, 14):
+    for n in (6, 9, 10, 11, 12, 13, 14, 15, 16):
         G = jax.device_put(rng.normal(size=(ROBOT_CHUNK, 3, n)))
         row = {"wires": n, "box_vertices_max": BOX_VERTICES_MAX}
         for key, fn in (("box_us", _box_vertices_max_sq), ("faces_us", _face_edges_max_sq)):

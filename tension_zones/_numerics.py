@@ -373,6 +373,59 @@ def pinv_rows(gram_pinv, a, b):
     return wmap(lambda x, y: i00 * x + i01 * y, a, b), wmap(lambda x, y: i01 * x + i11 * y, a, b)
 
 
+# -- the pseudo-inverse of a matrix's rows kept by a 0/1 mask ------------------------------------------
+#: A vmapped :func:`masked_pinv` whose matrix is shared and whose mask is batched takes each mask's
+#: pseudo-inverse from a table of every mask (``2^N`` entries) when the batch has at least this many
+#: members per entry: the table's cost is then shared by them (a batch of LAPACK calls costs about the
+#: same per matrix), and each member's is a lookup.
+MASK_TABLE_SHARE = 2
+
+
+def _masked_pinv(A, mask):
+    """``pinv(A * mask[:, None]) * mask[None, :]`` for ``A`` (N, n), ``mask`` (N,)."""
+    return jnp.linalg.pinv(A * mask[:, None]) * mask[None, :]
+
+
+@jax.custom_batching.custom_vmap
+def _masked_pinv_batched(A, mask):
+    return _masked_pinv(A, mask)
+
+
+@_masked_pinv_batched.def_vmap
+def _masked_pinv_rule(axis_size, in_batched, A, mask):
+    a_batched, m_batched = in_batched
+    n = A.shape[-2]
+    if a_batched or not m_batched or axis_size < MASK_TABLE_SHARE * 2**n:
+        return jax.vmap(_masked_pinv, in_axes=(0 if a_batched else None, 0 if m_batched else None))(A, mask), True
+    every = jnp.asarray(_mask_bits(n), A.dtype)  # (2^n, n): mask i has bit k of i at wire k
+    table = jax.vmap(_masked_pinv, in_axes=(None, 0))(A, every)
+    index = jnp.sum(jnp.where(mask > 0.5, 2 ** jnp.arange(n), 0), axis=1)
+    return table[index], True
+
+
+@functools.cache
+def _mask_bits(n: int) -> np.ndarray:
+    """(2^n, n): row ``i`` holds the bits of ``i``, wire ``k`` at bit ``k``."""
+    return (np.arange(2**n)[:, None] >> np.arange(n)[None, :]) & 1
+
+
+@jax.custom_jvp
+def masked_pinv(A, mask):
+    """The pseudo-inverse of ``A`` (N, n) with only the rows ``mask`` (N,) 0/1 keeps, its other columns
+    zero: ``pinv(A * mask[:, None]) * mask[None, :]``, (n, N) (JAX's ``pinv`` and its rank rule).
+
+    Vmapped over masks of a shared ``A``, each member's matrix comes from a table of every mask's
+    (:data:`MASK_TABLE_SHARE`), which turns a batch of SVDs into a lookup. Derivatives (in ``A`` and in
+    the mask, e.g. a straight-through one) are those of the formula.
+    """
+    return _masked_pinv_batched(A, mask)
+
+
+@masked_pinv.defjvp
+def _masked_pinv_jvp(primals, tangents):
+    return jax.jvp(_masked_pinv, primals, tangents)
+
+
 # -- singular values of a small matrix by one-sided Jacobi ----------------------------------------
 #: The most Jacobi sweeps (each rotates every pair of rows once); convergence is quadratic, so a few
 #: suffice in practice and the loop ends as soon as every pair is orthogonal to rounding.

@@ -13,7 +13,7 @@ from reference_chain import compliance as compliance_reference
 from reference_chain import measures
 
 import tension_zones as tz
-from tension_zones._numerics import singular_values
+from tension_zones._numerics import MASK_TABLE_SHARE, masked_pinv, singular_values
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
 from tension_zones.analysis._chain import BOX_VERTICES_MAX, _face_edges_max_sq
 from tension_zones.model import Robot
@@ -181,6 +181,55 @@ def test_a_small_matrixs_singular_values_are_numpys_and_their_derivatives_are_fi
     if want[-1] > 1e-6 * want[0] and gap > 1e-6 * want[0] and h > 1e-280:  # distinct, non-zero, a step
         fd = (np.linalg.svd(A + h * dA, compute_uv=False) - np.linalg.svd(A - h * dA, compute_uv=False)) / (2 * h)
         np.testing.assert_allclose(np.asarray(tangent), fd, rtol=1e-5, atol=1e-6 * max(1.0, want[0]))
+
+
+def test_a_batch_takes_the_taut_wires_pseudo_inverses_from_a_table_and_matches_the_reference():
+    """Vmapped over a batch of at least ``MASK_TABLE_SHARE x 2^N`` configurations, each reduced
+    Jacobian's pseudo-inverse is looked up in a table of every mask's (one SVD batch of ``2^N``), and
+    the measures are the per-configuration NumPy reference's, the straight and boundary ones included."""
+    rob = _robot(3, routed=True)
+    n = rob.n_wires
+    size = MASK_TABLE_SHARE * 2**n
+    rng = np.random.default_rng(7)
+    B = rng.uniform(-0.8, 0.8, (size, 3, 2))
+    B[: len(SPECIAL[3])] = np.asarray(SPECIAL[3], float)
+    reduced = jax.vmap(lambda b: rob.J_xq(b, rob.tension_mask(b)))
+    assert f"f64[{2**n},{n},6]" in str(jax.make_jaxpr(reduced)(B))  # the table: 2^N matrices in one SVD
+    assert f"f64[{2**n},{n},6]" not in str(jax.make_jaxpr(reduced)(B[:8]))  # a small batch: one SVD each
+    got = jax.jit(jax.vmap(lambda b: config_metrics(rob, b, 0.4)))(jnp.asarray(B))
+    for i in [*range(len(SPECIAL[3])), *rng.choice(size, 60, replace=False)]:
+        for k, v in _reference(rob, B[i]).items():
+            assert float(got[k][i]) == pytest.approx(v, rel=1e-6, abs=1e-6), (k, B[i].tolist())
+
+
+def test_the_pseudo_inverse_of_the_kept_rows_has_the_formulas_derivatives():
+    """``masked_pinv``'s derivatives, in the matrix and in the mask (a straight-through mask's soft
+    part), are the formula's, vmapped over a batch that takes the table."""
+    rng = np.random.default_rng(3)
+    A = jnp.asarray(rng.normal(size=(5, 4)))
+    masks = jnp.asarray((np.arange(2**5)[:, None] >> np.arange(5)) & 1, float)
+    masks = jnp.concatenate([masks] * MASK_TABLE_SHARE)  # every mask, enough for the table
+    dA = jnp.asarray(rng.normal(size=(5, 4)))
+    dm = jnp.asarray(rng.normal(size=masks.shape))
+
+    def formula(A, m):
+        return jnp.linalg.pinv(A * m[:, None]) * m[None, :]
+
+    batched = jax.vmap(masked_pinv, in_axes=(None, 0))
+    assert "f64[32,5,4]" in str(jax.make_jaxpr(batched)(A, masks))  # the table of every mask
+    want = jax.vmap(formula, in_axes=(None, 0))(A, masks)
+    np.testing.assert_allclose(batched(A, masks), want, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(want[5], np.linalg.pinv(np.asarray(A) * np.asarray(masks[5])[:, None]), atol=1e-13)
+    _, tangent = jax.jvp(batched, (A, masks), (dA, dm))
+    _, tangent_want = jax.jvp(jax.vmap(formula, in_axes=(None, 0)), (A, masks), (dA, dm))
+    np.testing.assert_allclose(tangent, tangent_want, rtol=0, atol=1e-12)
+    grad = jax.grad(lambda A: jnp.sum(batched(A, masks) ** 2))(A)
+    step = 1e-6
+    fd = [
+        (jnp.sum(batched(A + step * E, masks) ** 2) - jnp.sum(batched(A - step * E, masks) ** 2)) / (2 * step)
+        for E in np.eye(20).reshape(20, 5, 4)[:6]
+    ]
+    np.testing.assert_allclose(np.ravel(grad)[:6], fd, rtol=1e-6)
 
 
 def test_new_values_never_recompile():

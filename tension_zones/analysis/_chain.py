@@ -35,12 +35,12 @@ from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
 
-#: Up to this many generators the largest norm is taken over every vertex of the box at once: one
-#: matrix product with the ``2^(N - 1)`` sign vectors (``s`` and ``-s`` give the same norm), which a
-#: vmapped sweep runs as a single matrix product over its chunk. Beyond, the face-edge enumeration,
-#: whose cost grows as ``N^3`` where the box's grows as ``2^N`` (crossover measured: ``benchmarks/``,
-#: ROBOTS).
-BOX_VERTICES_MAX = 12
+#: Up to this many generators the largest norm is taken over every vertex of the box
+#: (:func:`_box_vertices_max_sq`, ``2^(N - 1)`` points: ``s`` and ``-s`` give the same norm), beyond
+#: over the ends of the zonotope's face edges, whose cost grows as ``N^3`` where the box's grows as
+#: ``2^N``; past the crossover the box's points no longer fuse into one pass (crossover measured:
+#: ``benchmarks/``, ROBOTS).
+BOX_VERTICES_MAX = 14
 
 
 def zonotope_max_sq(G):
@@ -57,16 +57,32 @@ def zonotope_max_sq(G):
 
 
 @functools.cache
-def _half_box_signs(n: int) -> np.ndarray:
-    """(n, 2^(n - 1)): every sign vector of ``{-1, 1}^n`` whose first entry is ``+1``."""
+def _box_signs(n: int, first_positive: bool) -> np.ndarray:
+    """(n, m): every sign vector of ``{-1, 1}^n`` (``m = 2^n``), or only those whose first entry is
+    ``+1`` (``m = 2^(n - 1)``)."""
     signs = np.array(list(itertools.product((1.0, -1.0), repeat=n)), dtype=float)
-    return signs[signs[:, 0] > 0].T
+    return (signs[signs[:, 0] > 0] if first_positive else signs).T
 
 
 def _box_vertices_max_sq(G):
-    """:func:`zonotope_max_sq` over every vertex of the box, one of each pair ``s, -s``."""
-    X = G @ jnp.asarray(_half_box_signs(G.shape[1]), G.dtype)  # (3, 2^(N-1)): points of the zonotope
-    return jnp.max(jnp.sum(X * X, axis=0))
+    """:func:`zonotope_max_sq` over every vertex of the box, one of each pair ``s, -s``.
+
+    The generators split in two halves, ``G s = G_1 s_1 + G_2 s_2``: the points of each half's box
+    (``2^(k - 1)`` with ``s_1``'s first sign fixed, ``2^(N - k)``) are summed pairwise, ``|x_1 + x_2|^2``
+    for every pair, which is every vertex of the box for about a fifth of the products of ``G`` with
+    all ``2^(N - 1)`` sign vectors. Written elementwise, so that vmapped it fuses.
+    """
+    k = (G.shape[1] + 1) // 2
+    x1 = _box_points(G[:, :k], _box_signs(k, True))
+    x2 = _box_points(G[:, k:], _box_signs(G.shape[1] - k, False))
+    return jnp.max(sum((a[:, None] + b[None, :]) ** 2 for a, b in zip(x1, x2)))
+
+
+def _box_points(G, signs):
+    """The points ``G s`` for the columns ``s`` of ``signs`` (n, m), as three (m,) coordinates; the
+    origin alone for no generators."""
+    zero = jnp.zeros(signs.shape[1], G.dtype)
+    return [sum((G[c, i] * jnp.asarray(signs[i], G.dtype) for i in range(G.shape[1])), zero) for c in range(3)]
 
 
 def _face_edges_max_sq(G):

@@ -31,7 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import pinv_tall2, skew, straight_through
+from .._numerics import masked_pinv, pinv_tall2, skew, straight_through
 from ._design import Design, MissingDesignKeyWarning, missing_physical_keys, read_json
 from ._kinematics import b_to_psi, moment_arms, segment_J_xb, segment_pose
 from ._zones import BOUNDARY_TOL, TEMPERATURE
@@ -361,9 +361,9 @@ class Robot:
         """``J_xB pinv(J_qB)``, (6, N); ``mask`` (N,) keeps only the taut wires' rows (reduced)."""
         Jx, Jq = self.J_xB(B), self.J_qB()
         mask = jnp.ones(self.n_wires, Jq.dtype) if mask is None else jnp.asarray(mask, Jq.dtype)
-        Jq = Jq * mask[:, None]
-        pinv = pinv_tall2(Jq) if self.n_segments == 1 else jnp.linalg.pinv(Jq)
-        return Jx @ (pinv * mask[None, :])  # slack wires' columns exactly zero
+        if self.n_segments == 1:
+            return Jx @ (pinv_tall2(Jq * mask[:, None]) * mask[None, :])  # slack wires' columns exactly zero
+        return Jx @ masked_pinv(Jq, mask)
 
     def reduced_J_xq(self, B, B_dot=None):
         """The reduced Jacobian: only the wires in their tension zone for ``B_dot``, (6, N)."""
