@@ -139,6 +139,19 @@ SHARDED = textwrap.dedent("""
     for k in one:
         assert np.array_equal(one[k], four[k]), k
     print("identical", len(one))
+    # a robot's sweep runs on one device (XLA:CPU deadlocks sharding it over host devices)
+    from tension_zones.analysis import config_metrics, config_samples, sweep_configs
+    robot = tz.Robot.from_json(tz.example_path("ftdcr_v4/design.json"))
+    B = config_samples(3, 300, 90.0)
+    default = sweep_configs(config_metrics, robot, B, 0.4, chunk_size=128, quiet=True)
+    first = sweep_configs(config_metrics, robot, B, 0.4, chunk_size=128, devices=jax.devices()[:1], quiet=True)
+    for k in first:
+        assert np.array_equal(default[k], first[k]), k
+    try:
+        sweep_configs(config_metrics, robot, B, 0.4, devices=jax.devices(), quiet=True)
+    except ValueError as e:
+        assert "one CPU device" in str(e), e
+        print("robot on one device")
 """)
 
 
@@ -152,7 +165,7 @@ def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
         [sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env, timeout=600, check=False
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "identical 17" in r.stdout
+    assert "identical 17" in r.stdout and "robot on one device" in r.stdout
 
 
 # ------------------------------------------------------------------------------------------------

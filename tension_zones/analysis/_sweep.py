@@ -15,8 +15,8 @@ flat list of poses (:func:`sweep_poses`):
   arguments; ``fn`` is a static argument (pass the same function object to reuse the compiled code).
 * **progress**: a ``tqdm`` bar on sweeps of more than one chunk, unless ``quiet``.
 * **several devices**: the pose axis of each chunk is sharded over ``devices`` (default: every local
-  device) with :mod:`jax.sharding`; the design and ``args`` are replicated. Each device runs the
-  same ``chunk_size``-pose program and a pose always sits at the same position of its device's
+  device; a robot's, one CPU device: :func:`_mesh`) with :mod:`jax.sharding`; the design and ``args``
+  are replicated. Each device runs the same ``chunk_size``-pose program and a pose always sits at the same position of its device's
   block (``index mod chunk_size``), so results are bit-for-bit identical on one device or many.
 """
 
@@ -126,10 +126,22 @@ def compiled_chunk_count() -> int:
     return sum(f._cache_size() for f in jits)
 
 
-def _mesh(devices):
+def _mesh(devices, subject):
+    """The mesh a chunk's poses are sharded over: ``devices`` (default: every local device). A robot's
+    chunk runs on one CPU device: XLA:CPU deadlocks running a three-segment robot's measures over
+    several host devices (``--xla_force_host_platform_device_count``), where one device gains nothing
+    (one program runs at a time, on the cores it can use)."""
+    given = devices is not None
     devices = list(jax.local_devices() if devices is None else devices)
     if not devices:
         raise ValueError("devices must name at least one device")
+    if isinstance(subject, Robot) and len(devices) > 1 and all(d.platform == "cpu" for d in devices):
+        if given:
+            raise ValueError(
+                f"a robot's sweep runs on one CPU device, got {len(devices)}: XLA:CPU deadlocks sharding it "
+                "over host devices; pass devices=[one] or leave devices out"
+            )
+        devices = devices[:1]
     return Mesh(np.array(devices), ("poses",)), len(devices)
 
 
@@ -151,7 +163,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
         chunk_size = default_chunk(design.n_wires) if isinstance(design, Design) else ROBOT_CHUNK
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    mesh, n_dev = _mesh(devices)
+    mesh, n_dev = _mesh(devices, design)
     chunk = int(chunk_size) * n_dev  # every device always gets chunk_size poses (see module doc)
     batch, replicated = NamedSharding(mesh, PartitionSpec("poses")), NamedSharding(mesh, PartitionSpec())
     design_d = jax.device_put(design, replicated)
