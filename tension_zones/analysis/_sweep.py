@@ -16,8 +16,9 @@ flat list of poses (:func:`sweep_poses`):
 * **progress**: a ``tqdm`` bar on sweeps of more than one chunk, unless ``quiet``.
 * **several devices**: the pose axis of each chunk is sharded over ``devices`` (default: every local
   device; a robot's, one CPU device: :func:`_mesh`) with :mod:`jax.sharding`; the design and ``args``
-  are replicated. Each device runs the same ``chunk_size``-pose program and a pose always sits at the same position of its device's
-  block (``index mod chunk_size``), so results are bit-for-bit identical on one device or many.
+  are replicated. Each device runs the same ``chunk_size``-pose program and a pose always sits at the
+  same position of its device's block (``index mod chunk_size``), so results are bit-for-bit
+  identical on one device or many.
 """
 
 from __future__ import annotations
