@@ -152,6 +152,16 @@ SHARDED = textwrap.dedent("""
     except ValueError as e:
         assert "one CPU device" in str(e), e
         print("robot on one device")
+    # so does an exploration of robots (each chunk's designs on one device)
+    import tempfile
+    seg = lambda L, r: {"length_mm": L, "n_wires": [3], "pitch_radius_mm": r}
+    space = tz.parse_space({"segments": [seg(40.0, [2.0, 4.0]), seg(30.0, 2.0), seg(30.0, 2.0)], "samples": 64,
+                            "sample": {"method": "halton", "designs": 4}})
+    with tempfile.TemporaryDirectory() as d:
+        tz.explore(space, d + "/o", quiet=True)
+        t = np.load(d + "/o/table.npz")
+        assert t["design"].size == 4 and np.all(np.isfinite(t["dp_max_reduced_worst"]))
+    print("robots explored")
 """)
 
 
@@ -165,7 +175,7 @@ def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
         [sys.executable, "-c", SHARDED], capture_output=True, text=True, env=env, timeout=600, check=False
     )
     assert r.returncode == 0, r.stderr[-2000:]
-    assert "identical 17" in r.stdout and "robot on one device" in r.stdout
+    assert "identical 17" in r.stdout and "robot on one device" in r.stdout and "robots explored" in r.stdout
 
 
 # ------------------------------------------------------------------------------------------------

@@ -128,22 +128,28 @@ def compiled_chunk_count() -> int:
 
 
 def _mesh(devices, subject):
-    """The mesh a chunk's poses are sharded over: ``devices`` (default: every local device). A robot's
-    chunk runs on one CPU device: XLA:CPU deadlocks running a three-segment robot's measures over
-    several host devices (``--xla_force_host_platform_device_count``), where one device gains nothing
-    (one program runs at a time, on the cores it can use)."""
+    """The mesh a chunk's poses are sharded over (:func:`_local_devices`)."""
+    devices = _local_devices(isinstance(subject, Robot), devices)
+    return Mesh(np.array(devices), ("poses",)), len(devices)
+
+
+def _local_devices(robot: bool, devices=None) -> list:
+    """The devices a chunk runs on: ``devices`` (default: every local device). A robot's chunk runs on
+    one CPU device: XLA:CPU deadlocks running a three-segment robot's measures over several host
+    devices (``--xla_force_host_platform_device_count``), where one device gains nothing (one program
+    runs at a time, on the cores it can use)."""
     given = devices is not None
     devices = list(jax.local_devices() if devices is None else devices)
     if not devices:
         raise ValueError("devices must name at least one device")
-    if isinstance(subject, Robot) and len(devices) > 1 and all(d.platform == "cpu" for d in devices):
+    if robot and len(devices) > 1 and all(d.platform == "cpu" for d in devices):
         if given:
             raise ValueError(
                 f"a robot's sweep runs on one CPU device, got {len(devices)}: XLA:CPU deadlocks sharding it "
                 "over host devices; pass devices=[one] or leave devices out"
             )
         devices = devices[:1]
-    return Mesh(np.array(devices), ("poses",)), len(devices)
+    return devices
 
 
 def _subject_dtype(subject) -> np.dtype:
@@ -553,13 +559,13 @@ def _workspace(source, P: int, dt, idx_t) -> tuple:
     return (*_pad_axes((th, de), P * -(-max(th.size, de.size) // P), dt), idx_t(de.size))
 
 
-def _placement(dt, source, n_poses: int, D: int, P: int, args) -> tuple:
-    """Where the chunks run: the mesh of the process's local devices, a chunk's ``D`` designs padded to
-    split evenly over them, the sharding that splits them, and what every chunk shares (the workspace
-    ``source`` padded to whole steps of ``P`` poses, :func:`_workspace`, its ``n_poses``, ``args``), on
-    every device."""
-    idx_t = np.int64 if n_poses + P >= 2**31 else np.int32
-    mesh = Mesh(np.array(jax.local_devices()), ("designs",))
+def _placement(designs, source, n_poses: int, D: int, P: int, args) -> tuple:
+    """Where the chunks run: the mesh of the process's local devices (:func:`_local_devices`: for a
+    batch of robots, one CPU device), a chunk's ``D`` designs padded to split evenly over them, the
+    sharding that splits them, and what every chunk shares (the workspace ``source`` padded to whole
+    steps of ``P`` poses, :func:`_workspace`, its ``n_poses``, ``args``), on every device."""
+    dt, idx_t = _subject_dtype(designs), np.int64 if n_poses + P >= 2**31 else np.int32
+    mesh = Mesh(np.array(_local_devices(isinstance(designs, Robot))), ("designs",))
     padded = mesh.size * -(-D // mesh.size)
     split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
     shared = jax.device_put((_workspace(source, P, dt, idx_t), idx_t(n_poses), tuple(args)), whole)
@@ -647,7 +653,7 @@ def sweep_designs(
     mine = pending[jax.process_index() :: nproc]
     n_rounds = -(-pending.size // nproc)  # the same on every process: the collectives line up
 
-    mesh, padded, split, shared = _placement(_subject_dtype(designs), source, n_poses, D, P, args)
+    mesh, padded, split, shared = _placement(designs, source, n_poses, D, P, args)
 
     def launch(k):  # this process's k-th chunk, dispatched asynchronously
         if k >= mine.size:
