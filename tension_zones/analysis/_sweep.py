@@ -15,7 +15,7 @@ flat list of poses (:func:`sweep_poses`):
   arguments; ``fn`` is a static argument (pass the same function object to reuse the compiled code).
 * **progress**: a ``tqdm`` bar on sweeps of more than one chunk, unless ``quiet``.
 * **several devices**: the pose axis of each chunk is sharded over ``devices`` (default: every local
-  device; a robot's, one CPU device: :func:`_mesh`) with :mod:`jax.sharding`; the design and ``args``
+  device; a robot's, one CPU device: :func:`chunk_devices`) with :mod:`jax.sharding`; the design and ``args``
   are replicated. Each device runs the same ``chunk_size``-pose program and a pose always sits at the
   same position of its device's block (``index mod chunk_size``), so results are bit-for-bit
   identical on one device or many.
@@ -128,12 +128,12 @@ def compiled_chunk_count() -> int:
 
 
 def _mesh(devices, subject):
-    """The mesh a chunk's poses are sharded over (:func:`_local_devices`)."""
-    devices = _local_devices(isinstance(subject, Robot), devices)
+    """The mesh a chunk's poses are sharded over (:func:`chunk_devices`)."""
+    devices = chunk_devices(isinstance(subject, Robot), devices)
     return Mesh(np.array(devices), ("poses",)), len(devices)
 
 
-def _local_devices(robot: bool, devices=None) -> list:
+def chunk_devices(robot: bool, devices=None) -> list:
     """The devices a chunk runs on: ``devices`` (default: every local device). A robot's chunk runs on
     one CPU device: XLA:CPU deadlocks running a three-segment robot's measures over several host
     devices (``--xla_force_host_platform_device_count``), where one device gains nothing (one program
@@ -560,12 +560,12 @@ def _workspace(source, P: int, dt, idx_t) -> tuple:
 
 
 def _placement(designs, source, n_poses: int, D: int, P: int, args) -> tuple:
-    """Where the chunks run: the mesh of the process's local devices (:func:`_local_devices`: for a
+    """Where the chunks run: the mesh of the process's local devices (:func:`chunk_devices`: for a
     batch of robots, one CPU device), a chunk's ``D`` designs padded to split evenly over them, the
     sharding that splits them, and what every chunk shares (the workspace ``source`` padded to whole
     steps of ``P`` poses, :func:`_workspace`, its ``n_poses``, ``args``), on every device."""
     dt, idx_t = _subject_dtype(designs), np.int64 if n_poses + P >= 2**31 else np.int32
-    mesh = Mesh(np.array(_local_devices(isinstance(designs, Robot))), ("designs",))
+    mesh = Mesh(np.array(chunk_devices(isinstance(designs, Robot))), ("designs",))
     padded = mesh.size * -(-D // mesh.size)
     split, whole = NamedSharding(mesh, PartitionSpec("designs")), NamedSharding(mesh, PartitionSpec())
     shared = jax.device_put((_workspace(source, P, dt, idx_t), idx_t(n_poses), tuple(args)), whole)

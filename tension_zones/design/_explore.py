@@ -24,7 +24,7 @@ import numpy as np
 from .._io import LOCK_NAME, atomic_path, folder_lock
 from ..analysis._chain import config_metrics
 from ..analysis._metrics import DEFAULT_DQ, pose_metrics
-from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, _local_devices, sweep_designs
+from ..analysis._sweep import DEFAULT_DESIGN_CHUNK, DESIGN_POSE_CHUNK, chunk_devices, sweep_designs
 from ..model._chain_statics import config_compliance
 from ..model._design import Design, read_json
 from ..model._robot import Robot
@@ -193,7 +193,7 @@ CONFIG_BYTES_STATICS = 10
 def chunk_memory(space: Space, n) -> int:
     """Estimated peak memory (bytes) of one chunk of ``n``-wire designs of ``space`` (see ``POSE_BYTES``;
     several segments: ``n`` a combination of counts, see ``CONFIG_BYTES``)."""
-    devices = len(_local_devices(bool(space.segments)))
+    devices = len(chunk_devices(bool(space.segments)))
     if space.segments:
         N = sum(n)
         per_pose = (
