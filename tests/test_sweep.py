@@ -165,6 +165,35 @@ SHARDED = textwrap.dedent("""
 """)
 
 
+def test_a_robot_sweep_takes_the_chunk_its_function_asks_for(monkeypatch):
+    """``config_metrics`` asks for :data:`METRICS_CHUNK` configurations per call up to
+    ``BOX_VERTICES_MAX`` wires and :data:`ROBOT_CHUNK` beyond; a function that says nothing gets
+    ``ROBOT_CHUNK``. The sweep at its default chunk equals the measures evaluated one by one."""
+    from conftest import two_segments
+
+    from tension_zones.analysis import _sweep, config_metrics, config_samples, sweep_configs
+    from tension_zones.analysis._chain import BOX_VERTICES_MAX, METRICS_CHUNK
+
+    robot = two_segments()
+    many = tz.Robot([tz.Design(8, 40.0, 3.0), tz.Design(BOX_VERTICES_MAX - 7, 50.0, 2.5)])
+    assert METRICS_CHUNK > _sweep.ROBOT_CHUNK
+    assert _sweep.robot_chunk(config_metrics, robot) == METRICS_CHUNK
+    assert _sweep.robot_chunk(config_metrics, many) == _sweep.ROBOT_CHUNK
+    assert _sweep.robot_chunk(lambda r, B: {"B": B}, robot) == _sweep.ROBOT_CHUNK
+
+    sizes, run = [], _sweep._eval_chunk_jit
+    monkeypatch.setattr(
+        _sweep, "_eval_chunk_jit", lambda fn, d, poses, a: sizes.append(poses[0].shape[0]) or run(fn, d, poses, a)
+    )
+    B = config_samples(2, 300, 60.0)
+    res = sweep_configs(config_metrics, robot, B, 0.4, quiet=True)
+    assert sizes == [METRICS_CHUNK]
+    for i in (0, 151, 299):
+        ref = config_metrics(robot, B[i], 0.4)
+        for k, v in ref.items():
+            np.testing.assert_allclose(res[k][i], v, rtol=1e-12, atol=1e-12, err_msg=k)
+
+
 @pytest.mark.slow
 def test_sharded_over_four_devices_gives_identical_results(default_codegen_env):
     env = default_codegen_env(

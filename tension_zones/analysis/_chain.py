@@ -34,6 +34,7 @@ from .._numerics import eps_of, singular_values
 from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
+from ._sweep import ROBOT_CHUNK
 
 #: Up to this many generators the largest norm is taken over every vertex of the box
 #: (:func:`_box_vertices_max_sq`, ``2^(N - 1)`` points: ``s`` and ``-s`` give the same norm), beyond
@@ -234,3 +235,19 @@ def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
                 out[f"{k}_{mode}"] = v
     out["n_taut_segments"] = crossing
     return out
+
+
+#: Configurations per chunk of a sweep of :func:`config_metrics` (:func:`~._sweep.sweep_configs`' default)
+#: up to :data:`BOX_VERTICES_MAX` wires: its working set is then a few kilobytes per configuration, so
+#: a chunk larger than a loaded sweep's spreads each call's fixed costs (the table of every mask's
+#: reduced pseudo-inverse: :func:`~tension_zones._numerics.masked_pinv`) over more configurations.
+#: Beyond, the face edges' pair terms take :data:`~._sweep.ROBOT_CHUNK`.
+METRICS_CHUNK = 1 << 13
+
+
+def _metrics_chunk(robot: Robot) -> int:
+    return METRICS_CHUNK if robot.n_wires <= BOX_VERTICES_MAX else ROBOT_CHUNK
+
+
+# sweep_configs' default chunk for it (_sweep.robot_chunk)
+config_metrics.chunk_size = _metrics_chunk  # type: ignore[attr-defined]

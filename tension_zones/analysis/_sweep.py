@@ -51,8 +51,17 @@ def default_chunk(n_wires: int) -> int:
 
 
 #: Configurations per chunk of a robot's sweep (:func:`sweep_configs`): its exact bounds take
-#: (N^2 / 2, N) pair terms per configuration, so a chunk is smaller than a segment's.
+#: (N^2 / 2, N) pair terms per configuration, so a chunk is smaller than a segment's. A function
+#: whose working set is known may say otherwise (:func:`robot_chunk`).
 ROBOT_CHUNK = 1 << 11
+
+
+def robot_chunk(fn: Callable, robot: Robot) -> int:
+    """The default chunk of :func:`sweep_configs` for ``fn``: ``fn.chunk_size(robot)`` where ``fn``
+    has one (a measure that knows its working set, e.g. :func:`~._chain.config_metrics`), else
+    :data:`ROBOT_CHUNK`."""
+    rule = getattr(fn, "chunk_size", None)
+    return int(rule(robot)) if callable(rule) else ROBOT_CHUNK
 
 
 #: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
@@ -167,7 +176,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     poses generated on the device; results flat (N, ...). ``design`` is a Design or a Robot."""
     dt = _subject_dtype(design)
     if chunk_size is None:
-        chunk_size = default_chunk(design.n_wires) if isinstance(design, Design) else ROBOT_CHUNK
+        chunk_size = default_chunk(design.n_wires) if isinstance(design, Design) else robot_chunk(fn, design)
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1:
         raise ValueError(f"chunk_size must be a positive integer, got {chunk_size!r}")
     mesh, n_dev = _mesh(devices, design)
@@ -302,7 +311,7 @@ def sweep_configs(
             :func:`tension_zones.analysis.config_metrics`.
         robot: the robot (its numbers are traced: new values reuse the compiled code).
         B: (M, S, 2) configurations, rad (e.g. :func:`tension_zones.analysis.config_samples`).
-        chunk_size: configurations per device and compiled call (default :data:`ROBOT_CHUNK`); the
+        chunk_size: configurations per device and compiled call (default :func:`robot_chunk`); the
             other arguments as :func:`sweep_poses`.
 
     Returns a dict of NumPy arrays ``(M, ...)``.
