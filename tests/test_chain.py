@@ -325,6 +325,35 @@ def test_a_one_segment_robots_compliance_is_the_segments():
             np.testing.assert_allclose(np.asarray(a[k]), np.asarray(b[k]), rtol=1e-10, atol=1e-12, err_msg=k)
 
 
+def test_every_free_sets_residual_by_its_affine_form_is_the_sets_own():
+    """The tensions try every free set through forms affine in the equilibrium's right-hand side,
+    formed once per robot; each set's KKT residual equals that of the set's own closed form
+    (``_set_tensions`` then ``kkt_residual``), bent, straight, preloaded, and under a wrench that
+    bunched wires cannot hold. Vmapped over configurations, the forms are not per configuration: a
+    chunk of a 12-wire robot's compliance needs a fraction of the memory of every set's tensions."""
+    from tension_zones.model._chain_statics import (
+        _set_residuals,
+        _set_tensions,
+        _subsets,
+        chain_equilibrium,
+        kkt_residual,
+    )
+
+    bunched = Robot([tz.Design(3, 30.0, 3.0, wire_angles=np.radians([0, 10, 20])) for _ in range(2)])
+    rng = np.random.default_rng(4)
+    for rob, w in ((Robot(STATIC_SEGMENTS), WRENCHES[1]), (bunched, np.array([5.0, 0, 0, 0, 0, 0]))):
+        S, f = rob.n_segments, jnp.asarray(rob.preload)
+        sets = jnp.asarray(_subsets(rob.n_wires))
+        for B in (np.zeros((S, 2)), rng.uniform(-0.8, 0.8, (S, 2))):
+            A, rhs = chain_equilibrium(rob, jnp.asarray(B), jnp.asarray(w))
+            own = jax.vmap(lambda s, A=A, rhs=rhs, f=f: kkt_residual(A, rhs, f, *_set_tensions(A, rhs, f, s)))(sets)
+            np.testing.assert_allclose(_set_residuals(A, rhs, f, sets), own, rtol=1e-9, atol=1e-12)
+    twelve = Robot([tz.Design(4, 30.0, 2.0 + 0.3 * j, preload=1.0) for j in range(3)])
+    chunk = jax.jit(jax.vmap(lambda B: config_compliance(twelve, B, WRENCHES[0])))
+    temp = chunk.lower(jnp.zeros((2048, 3, 2))).compile().memory_analysis().temp_size_in_bytes
+    assert temp < 2048 * 2**12 * twelve.n_wires * 8  # (less than one set's tensions per configuration)
+
+
 def test_a_load_the_wires_cannot_hold_is_infeasible_and_nan():
     """Wires bunched on one side of each segment cannot pull the other way: no deflection is made up."""
     bunched = [tz.Design(3, 30.0, 3.0, wire_angles=np.radians([0, 10, 20])) for _ in range(2)]

@@ -51,25 +51,49 @@ def _set_tensions(A, rhs, f_min, free):
     return jnp.where(free > 0, AF.T @ lam, f_min), lam
 
 
+def _set_forms(A, f_min, sets):
+    """Every free set's tensions and pulls as affine functions of ``rhs``: for set ``s`` (of ``sets``
+    (K, N)) ``tau_s = Mt_s rhs + ct_s``, ``A^T lam_s = Mp_s rhs + cp_s`` and the primal residual
+    ``A tau_s - rhs = MA_s rhs + cA_s`` (:func:`_set_tensions`). They depend on ``A`` and ``f_min``
+    alone, so vmapped over configurations of one robot they are formed once per batch, and each
+    configuration tries every set by matrix products."""
+    AF = A[None] * sets[:, None, :]
+    P = jnp.linalg.pinv(AF @ jnp.swapaxes(AF, 1, 2), hermitian=True)  # (K, m, m)
+    c = (f_min[None, :] * (1.0 - sets)) @ A.T  # (K, m): A f_min on the wires at their bound
+    Mp = jnp.einsum("mn,kml->knl", A, P)  # A^T P_s (K, N, m)
+    cp = -jnp.einsum("knl,kl->kn", Mp, c)
+    Mt = Mp * sets[:, :, None]
+    ct = jnp.where(sets > 0, cp, f_min[None, :])
+    MA = jnp.einsum("mn,knl->kml", A, Mt) - jnp.eye(A.shape[0], dtype=A.dtype)[None]
+    return Mt, ct, Mp, cp, MA, ct @ A.T
+
+
+def _set_residuals(A, rhs, f_min, sets):
+    """:func:`~._statics.kkt_residual` of every free set's tensions (K,)."""
+    Mt, ct, Mp, cp, MA, cA = _set_forms(A, f_min, sets)
+    tau, pull = Mt @ rhs + ct, Mp @ rhs + cp  # (K, N)
+    primal = jnp.linalg.norm(MA @ rhs + cA, axis=1)
+    station = jnp.max(jnp.abs(tau - jnp.maximum(f_min[None, :], pull)), axis=1)
+    norm_A = jnp.linalg.norm(A)
+    max_tau = jnp.maximum(jnp.max(jnp.abs(tau), axis=1), jnp.max(f_min))
+    return (primal + station * norm_A) / (jnp.linalg.norm(rhs) + norm_A * max_tau + jnp.finfo(A.dtype).tiny)
+
+
 def chain_min_norm_tensions(A, rhs, f_min) -> TensionSolution:
     """Exact ``min ||tau||^2 s.t. A tau = rhs, tau >= f_min`` for ``A`` (m, N), ``f_min`` (N,).
 
     The strictly convex QP's KKT point is unique: every free set is tried (a static enumeration of the
-    ``2^N``) and the one whose tensions meet the KKT conditions is kept; its closed form carries the
-    gradient, the choice of set does not. ``feasible`` False: no set does (the wires would push).
+    ``2^N``, :func:`_set_residuals`) and the one whose tensions meet the KKT conditions is kept; its
+    closed form carries the gradient, the choice of set does not. ``feasible`` False: no set does
+    (the wires would push).
     """
     n = A.shape[1]
     if n > MAX_CHAIN_WIRES:
         raise ValueError(f"a robot's tensions enumerate 2^N free sets: at most {MAX_CHAIN_WIRES} wires, got {n}")
     sets = jnp.asarray(_subsets(n), A.dtype)
-
+    f_min = jnp.broadcast_to(jnp.asarray(f_min, A.dtype), (n,))
     A0, rhs0, f0 = (jax.lax.stop_gradient(x) for x in (A, rhs, f_min))  # the choice carries no gradient
-
-    def residual(free):
-        tau, lam = _set_tensions(A0, rhs0, f0, free)
-        return kkt_residual(A0, rhs0, f0, tau, lam)
-
-    res = jax.vmap(residual)(sets)
+    res = _set_residuals(A0, rhs0, f0, sets)
     free = sets[jnp.argmin(jnp.where(jnp.isnan(res), jnp.inf, res))]
     tau, lam = _set_tensions(A, rhs, f_min, free)
     res = kkt_residual(A, rhs, f_min, tau, lam)
