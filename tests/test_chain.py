@@ -351,7 +351,7 @@ def test_every_free_sets_residual_by_its_affine_form_is_the_sets_own():
     twelve = Robot([tz.Design(4, 30.0, 2.0 + 0.3 * j, preload=1.0) for j in range(3)])
     chunk = jax.jit(jax.vmap(lambda B: config_compliance(twelve, B, WRENCHES[0])))
     temp = chunk.lower(jnp.zeros((2048, 3, 2))).compile().memory_analysis().temp_size_in_bytes
-    assert temp < 2048 * 2**12 * twelve.n_wires * 8  # (less than one set's tensions per configuration)
+    assert temp < 2048 * 2**12 * twelve.n_wires * 8  # (below every set's tensions, for each configuration)
 
 
 def test_a_load_the_wires_cannot_hold_is_infeasible_and_nan():
