@@ -64,8 +64,9 @@ def robot_chunk(fn: Callable, robot: Robot) -> int:
     return int(rule(robot)) if callable(rule) else ROBOT_CHUNK
 
 
-#: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so a second
-#: and third chunk in flight keep both cores busy (one program alone runs on about one core).
+#: Chunks dispatched at once: the CPU runtime runs independent programs concurrently, so the cores
+#: stay busy while an earlier chunk's results are copied out and the next one is launched (a short
+#: chunk's program alone leaves them partly idle; a long one's already fills them).
 IN_FLIGHT = 3
 
 
