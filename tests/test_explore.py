@@ -157,15 +157,22 @@ def _config_with_statics(robot, B, dq, wrench):
     return {**tz.config_metrics(robot, B, dq), **tz.config_compliance(robot, B, wrench)}
 
 
-def test_a_robot_s_statistics_equal_its_own_sweep():
+def test_a_robot_s_statistics_equal_its_own_sweep(monkeypatch):
     """Per-robot statistics equal the single robot's configuration sweep reduced with NumPy (to 1e-12),
     for the robots of a space (two chunks of 4, the last padded), under a load: every kinematic column
     and the compliance's (``config_compliance``; the kinematic program alone runs in the CLI test of
-    the shipped space below); each robot is the layout the row says."""
+    the shipped space below); each robot is the layout the row says. The chunk's memory estimate
+    (``_explore.chunk_memory``, what the resource check goes by) is above XLA's analysis of its program."""
     load = [0.5, 0.2, -0.3]
     space = tz.parse_space({**ROBOTS, "load_N": load})
     batch, cols = space.batch((4, 3)), space.columns((4, 3))
+    calls = []
+    chunk_jit = _sweep._designs_chunk_jit
+    monkeypatch.setattr(_sweep, "_designs_chunk_jit", lambda *a: calls.append(a) or chunk_jit(*a))
     got = explore_designs(batch, space.configs, None, 0.4, load, designs_per_chunk=4, quiet=True)
+    mem = chunk_jit.lower(*calls[0]).compile().memory_analysis()
+    used = mem.temp_size_in_bytes + mem.argument_size_in_bytes + mem.output_size_in_bytes
+    assert calls[0][2][0] == space.poses_per_chunk and 0 < used < _explore.chunk_memory(space, (4, 3))
     for i in range(space.count((4, 3))):
         robot = jax.tree_util.tree_map(lambda x: x[i], batch)  # noqa: B023  (used at once)
         assert float(robot.segments[1].pitch_radius) == cols["pitch_radius_mm_2"][i]

@@ -185,9 +185,10 @@ POSE_BYTES, POSE_BYTES_N2, DESIGN_BYTES = 330, 15, 1024
 #: wires in all (the exact bound's pair terms beyond ``BOX_VERTICES_MAX`` wires, less up to it; XLA's
 #: memory analysis, two and three segments of 3 to 8 wires each, kept above it).
 CONFIG_BYTES, CONFIG_BYTES_N3 = 4000, 30
-#: With a load, ``CONFIG_BYTES_STATICS x 2^N x N^2`` bytes more per configuration (the tensions' 2^N free
-#: sets, ``model.config_compliance``; XLA's memory analysis, 3+3 to 4+4+4 wires, at most 7.6, kept above).
-CONFIG_BYTES_STATICS = 10
+#: With a load, ``CONFIG_BYTES_STATICS + CONFIG_BYTES_SET x 2^N`` bytes more per configuration (the
+#: tensions' 2^N free sets, ``model.config_compliance``, whose residuals fuse with their minimum; XLA's
+#: memory analysis, 3+3 to 3+3+3+3 wires, kept above it).
+CONFIG_BYTES_STATICS, CONFIG_BYTES_SET = 4000, 12
 
 
 def chunk_memory(space: Space, n) -> int:
@@ -197,7 +198,9 @@ def chunk_memory(space: Space, n) -> int:
     if space.segments:
         N = sum(n)
         per_pose = (
-            CONFIG_BYTES + CONFIG_BYTES_N3 * N**3 + (0 if space.load is None else CONFIG_BYTES_STATICS * 2**N * N**2)
+            CONFIG_BYTES
+            + CONFIG_BYTES_N3 * N**3
+            + (0 if space.load is None else CONFIG_BYTES_STATICS + CONFIG_BYTES_SET * 2**N)
         )
     else:
         per_pose = POSE_BYTES + POSE_BYTES_N2 * n * n
@@ -216,6 +219,10 @@ RATE_KINEMATIC, RATE_LOADED, RATE_WIRES = 2e6, 6e5, 4
 #: ``(N / RATE_CHAIN_WIRES)^3`` times as much for ``N`` wires (the exact bound's pair terms, ``O(N^3)``;
 #: up to ``BOX_VERTICES_MAX`` wires the box's vertices, which cost less: the same table).
 RATE_CHAIN, RATE_CHAIN_WIRES = 5e4, 6
+#: A load's statics add about ``LOAD_UNITS + LOAD_UNITS_SETS x 2^N N / (2^6 6)`` configurations' worth
+#: of that rate (the tensions' 2^N free sets of N wires; explorations of 3+3 to 3+3+3+3 wires, kept
+#: above them).
+LOAD_UNITS, LOAD_UNITS_SETS = 0.5, 0.25
 #: The most computing an exploration takes with the resource checks on, in estimated seconds (a day).
 MAX_WORK_S = 86_400
 #: How an exploration's refusals say they can be overridden.
@@ -238,11 +245,11 @@ def work_seconds(space: Space) -> float | None:
 
 def _chain_cost(N: int, loaded: bool) -> float:
     """A robot configuration's cost against one of ``RATE_CHAIN_WIRES`` wires, kinematic: ``(N/6)^3``
-    (the exact bound); with a load ``2^N N^2`` times that of 6 wires more (the tensions' free sets).
-    Both kept at or below the rates of benchmarks/README.md's "Robots" table."""
+    (the exact bound); with a load the statics' ``LOAD_UNITS`` more (the tensions' free sets)."""
     r = max(N, RATE_CHAIN_WIRES)
     cost = (r / RATE_CHAIN_WIRES) ** 3
-    return cost + (2**r * r**2) / (2**RATE_CHAIN_WIRES * RATE_CHAIN_WIRES**2) if loaded else cost
+    sets = (2**r * r) / (2**RATE_CHAIN_WIRES * RATE_CHAIN_WIRES)
+    return cost + LOAD_UNITS + LOAD_UNITS_SETS * sets if loaded else cost
 
 
 def about(seconds: float) -> str:
