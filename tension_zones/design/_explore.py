@@ -245,7 +245,8 @@ def work_seconds(space: Space) -> float | None:
 
 def _chain_cost(N: int, loaded: bool) -> float:
     """A robot configuration's cost against one of ``RATE_CHAIN_WIRES`` wires, kinematic: ``(N/6)^3``
-    (the exact bound); with a load the statics' ``LOAD_UNITS`` more (the tensions' free sets)."""
+    (the exact bound); with a load ``LOAD_UNITS + LOAD_UNITS_SETS x 2^N N / (2^6 6)`` more (the
+    statics: the tensions' free sets)."""
     r = max(N, RATE_CHAIN_WIRES)
     cost = (r / RATE_CHAIN_WIRES) ** 3
     sets = (2**r * r) / (2**RATE_CHAIN_WIRES * RATE_CHAIN_WIRES)
