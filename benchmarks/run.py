@@ -246,7 +246,7 @@ def machine_line(res) -> str:
     return (
         f"Machine: {m['cores']} cores ({m['cpu']}), Python {m['python']}, jax {m['jax']}, "
         f"numpy {m['numpy']}; {m['date']}; command: `{res['command']}`; load average at the "
-        f"start {m['load_average_1min']:.1f} (other work on the machine slows every column alike)."
+        f"start {m['load_average_1min']:.1f}."
     )
 
 
