@@ -430,74 +430,134 @@ def _masked_pinv_jvp(primals, tangents):
 #: The most Jacobi sweeps (each rotates every pair of rows once); convergence is quadratic, so a few
 #: suffice in practice and the loop ends as soon as every pair is orthogonal to rounding.
 JACOBI_MAX_SWEEPS = 30
+#: Sweeps written out before the loop: vmapped, a loop's step is taken by the whole batch until its
+#: last member has converged, each member's state kept by a select; a 3 x 3 factor converges to
+#: rounding in about four sweeps, so the loop that follows rarely runs (it ends every member).
+JACOBI_UNROLLED = 4
 #: Jacobi's rotations grow as the square of the rows, LAPACK's batch of calls costs about the same per
 #: matrix: vmapped over a chunk, Jacobi is the faster up to three rows (a robot's (3, N) Jacobian
 #: blocks), LAPACK from six (a three-segment robot's (N, 6) taut wire directions).
 JACOBI_MAX_ROWS = 3
 
 
-def _jacobi_rows(R):
-    """One-sided Jacobi (Hestenes) on the ``k`` rows of ``R`` (k, n): plane rotations ``Q`` (k, k),
-    orthogonal, such that the rows of ``W = Q R`` are orthogonal (each pair to ``n eps``); their norms
-    are ``R``'s singular values, each to high relative accuracy. Rows as a list, rotated elementwise:
-    vmapped, every step is a plain array operation over the batch (a batch of LAPACK calls costs
-    more); the sweeps run until every batch member has converged."""
-    k = R.shape[0]
+def _dot(u, v):
+    """Dot product of two vectors given as lists of scalars."""
+    return sum(x * y for x, y in zip(u, v))
+
+
+def _gram_schmidt_rows(rows):
+    """Modified Gram-Schmidt on ``k`` rows of ``n`` scalars (k <= n): the rows of ``L`` (k, k), lower
+    triangular, with ``R = L Q_0`` and ``Q_0``'s rows orthonormal. ``L``'s singular values are ``R``'s
+    to ``O(n eps |R|)``: MGS's triangular factor is backward stable (Bjorck & Paige 1992), also where
+    ``R`` is rank deficient. A zero row gives a zero column."""
+    k = len(rows)
+    zero = jnp.zeros((), rows[0][0].dtype)
+    r = [list(x) for x in rows]
+    L = [[zero] * k for _ in range(k)]
+    for i in range(k):
+        size = jnp.sqrt(_dot(r[i], r[i]))
+        L[i][i] = size
+        q = [x / jnp.where(size > 0, size, 1.0) for x in r[i]]
+        for j in range(i + 1, k):
+            L[j][i] = _dot(q, r[j])
+            r[j] = [x - L[j][i] * y for x, y in zip(r[j], q)]
+    return L
+
+
+def _jacobi_rows(rows, tol, rotation=True):
+    """One-sided Jacobi (Hestenes) on ``k`` rows (lists of scalars): plane rotations ``Q`` (k, k),
+    orthogonal, such that the rows of ``W = Q R`` are orthogonal (each pair to ``tol``); their norms are
+    ``R``'s singular values. Every step is a scalar operation: vmapped, each is one elementwise
+    operation over the batch (the batch is the contiguous axis), and the sweeps run until every member
+    has converged. Returns ``W`` and ``Q`` as lists of rows (``Q`` only with ``rotation``, else
+    ``None``: the values alone carry half the state)."""
+    k = len(rows)
+    dtype = rows[0][0].dtype
     pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
-    tiny, tol = jnp.finfo(R.dtype).tiny, R.shape[1] * eps_of(R)  # a dot product's rounding
-    floor = tol * jnp.sum(R * R)  # rows at rounding's size (a zero singular value) point anywhere
+    floor = tol * sum(_dot(x, x) for x in rows)  # rows of rounding's size (a zero singular value) point anywhere
+
+    def rotate(u, v, cs, sn):
+        return [cs * x - sn * y for x, y in zip(u, v)], [sn * x + cs * y for x, y in zip(u, v)]
 
     def sweep(state):
         r, q, n, _ = state
-        r, q, worst = list(r), list(q), jnp.zeros((), R.dtype)
+        r, q, worst = [list(x) for x in r], [list(x) for x in q], jnp.zeros((), dtype)
         for i, j in pairs:
-            a, b, c = r[i] @ r[i], r[j] @ r[j], r[i] @ r[j]
-            turn = jnp.abs(c) > tiny  # already orthogonal: no rotation (and no 0 / 0)
+            a, b, c = _dot(r[i], r[i]), _dot(r[j], r[j]), _dot(r[i], r[j])
             size = jnp.maximum(jnp.sqrt(a) * jnp.sqrt(b), floor)
-            worst = jnp.maximum(worst, jnp.where(turn, jnp.abs(c) / jnp.where(turn, size, 1.0), 0.0))
-            zeta = (b - a) / (2.0 * jnp.where(turn, c, 1.0))
-            t = jnp.sign(zeta) / (jnp.abs(zeta) + jnp.hypot(1.0, zeta))  # the smaller root of t^2 + 2 zeta t = 1
-            t = jnp.where(turn, jnp.where(zeta == 0, 1.0, t), 0.0)
+            worst = jnp.maximum(worst, jnp.abs(c) / jnp.where(size > 0, size, 1.0))
+            t = _jacobi_tangent(a, b, c)
             cs = 1.0 / jnp.sqrt(1.0 + t * t)
-            sn = cs * t
-            r[i], r[j] = cs * r[i] - sn * r[j], sn * r[i] + cs * r[j]
-            q[i], q[j] = cs * q[i] - sn * q[j], sn * q[i] + cs * q[j]
-        return tuple(r), tuple(q), n + 1, worst
+            r[i], r[j] = rotate(r[i], r[j], cs, cs * t)
+            if rotation:
+                q[i], q[j] = rotate(q[i], q[j], cs, cs * t)
+        return _tuples(r), _tuples(q), n + 1, worst
 
     def going(state):
         return (state[2] < JACOBI_MAX_SWEEPS) & ~(state[3] <= tol)  # (NaN ends at the cap)
 
-    start = (tuple(R), tuple(jnp.eye(k, dtype=R.dtype)), jnp.zeros((), jnp.int32), jnp.ones((), R.dtype))
-    r, q, _, _ = jax.lax.while_loop(going, sweep, start)
-    return jnp.stack(r), jnp.stack(q)
+    eye = _rows(jnp.eye(k, dtype=dtype)) if rotation else []
+    state = (_tuples(rows), _tuples(eye), jnp.zeros((), jnp.int32), jnp.ones((), dtype))
+    for _ in range(JACOBI_UNROLLED):  # the sweeps nearly every matrix needs, without the loop's selects
+        state = sweep(state)
+    W, Q, _, _ = jax.lax.while_loop(going, sweep, state)
+    return W, (Q if rotation else None)
 
 
-def _scaled_jacobi(R):
-    """:func:`_jacobi_rows` of ``R / c``, ``c`` its largest entry's magnitude (squares neither underflow
-    nor overflow), and ``c``: ``W, Q, c`` with ``Q R = c W``."""
+def _jacobi_tangent(a, b, c):
+    """``t = tan(theta)`` of the rotation that makes two rows orthogonal, from their squared norms ``a``,
+    ``b`` and dot product ``c``: the smaller root of ``t^2 + 2 zeta t = 1``, ``zeta = (b - a) / (2 c)``,
+    written as ``2 c / (d + sqrt(d^2 + 4 c^2))`` with ``d = |b - a|`` (sign of ``b - a``, ``+`` at a tie):
+    no division by ``c``, ``|t| <= 1`` for any rounding of the inputs, 0 where ``c = 0`` and 45 degrees
+    where ``a = b``."""
+    d = b - a
+    den = jnp.abs(d) + jnp.sqrt(d * d + 4.0 * c * c)  # (rows scaled to entries <= 1: no overflow)
+    t = jnp.where(d >= 0, 2.0, -2.0) * c / jnp.where(den > 0, den, 1.0)
+    return jnp.where(den > 0, t, 0.0)
+
+
+def _rows(M):
+    """The rows of a matrix as lists of scalars."""
+    return [[M[i, j] for j in range(M.shape[1])] for i in range(M.shape[0])]
+
+
+def _tuples(rows):
+    """Rows of scalars as a loop's state (tuples)."""
+    return tuple(tuple(x) for x in rows)
+
+
+def _scaled_jacobi(R, rotation=True):
+    """Jacobi (:func:`_jacobi_rows`) on the Gram-Schmidt factor (:func:`_gram_schmidt_rows`) of
+    ``R / c`` (k, n), ``c`` its largest entry's magnitude (squares neither underflow nor overflow): the
+    rotation ``Q`` (k, k; ``None`` without ``rotation``), the singular values of ``R / c`` (k,),
+    unsorted, and ``c``. Rotating the ``k x k`` factor rather than the ``k x n`` rows costs ``k^2`` per
+    step, not ``k n``."""
     c = jnp.max(jnp.abs(R))
     c = jnp.where(c > 0, c, 1.0)
-    W, Q = _jacobi_rows(R / c)
-    return W, Q, c
+    rows = [[R[i, j] / c for j in range(R.shape[1])] for i in range(R.shape[0])]
+    W, Q = _jacobi_rows(_gram_schmidt_rows(rows), R.shape[1] * eps_of(R), rotation)  # tol: a dot's rounding
+    return (jnp.asarray(Q) if rotation else None), jnp.stack([jnp.sqrt(_dot(w, w)) for w in W]), c
 
 
 @jax.custom_jvp
 def _row_norms_orthogonalised(R):
-    """The singular values of ``R`` (k, n), k <= n: the norms of :func:`_jacobi_rows`' rows, unsorted."""
-    W, _, c = _scaled_jacobi(R)
-    return c * jnp.sqrt(jnp.sum(W * W, axis=1))
+    """The singular values of ``R`` (k, n), k <= n, unsorted (:func:`_scaled_jacobi`)."""
+    _, s, c = _scaled_jacobi(R, rotation=False)
+    return c * s
 
 
 @_row_norms_orthogonalised.defjvp
 def _row_norms_orthogonalised_jvp(primals, tangents):
-    """``d sigma_i = u_i^T dR v_i`` with ``u_i`` row ``i`` of ``Q`` and ``v_i = W_i / |W_i|`` (JAX's
-    ``svd`` rule): finite where two values meet (no rotation angle is differentiated), 0 at a zero."""
+    """``d sigma_i = u_i^T dR v_i`` with ``u_i`` row ``i`` of ``Q`` and ``v_i = W_i / |W_i|``,
+    ``W = Q R`` (JAX's ``svd`` rule): finite where two values meet (no rotation angle is
+    differentiated), 0 at a zero."""
     (R,), (dR,) = primals, tangents
-    W, Q, c = _scaled_jacobi(R)
+    Q, s, c = _scaled_jacobi(R)
+    W = Q @ (R / c)
     n = jnp.sqrt(jnp.sum(W * W, axis=1))
     pos = n > 0
     ds = jnp.einsum("ki,ij,kj->k", Q, dR, W) / jnp.where(pos, n, 1.0)
-    return c * n, jnp.where(pos, ds, 0.0)
+    return c * s, jnp.where(pos, ds, 0.0)
 
 
 def singular_values(A):

@@ -65,18 +65,46 @@ def _box_signs(n: int, first_positive: bool) -> np.ndarray:
     return (signs[signs[:, 0] > 0] if first_positive else signs).T
 
 
+#: Up to this many vertex pairs (``2^(N - 1)``, nine generators) :func:`_box_vertices_max_sq` writes
+#: every vertex's norm as scalar operations: vmapped, one fused pass over the batch (its contiguous
+#: axis). The program grows with the pairs, so beyond it maps the box's points as arrays.
+SCALAR_VERTICES_MAX = 256
+
+
 def _box_vertices_max_sq(G):
     """:func:`zonotope_max_sq` over every vertex of the box, one of each pair ``s, -s``.
 
     The generators split in two halves, ``G s = G_1 s_1 + G_2 s_2``: the points of each half's box
     (``2^(k - 1)`` with ``s_1``'s first sign fixed, ``2^(N - k)``) are summed pairwise, ``|x_1 + x_2|^2``
     for every pair, which is every vertex of the box for about a fifth of the products of ``G`` with
-    all ``2^(N - 1)`` sign vectors. Written elementwise, so that vmapped it fuses.
+    all ``2^(N - 1)`` sign vectors. Written elementwise, so that vmapped it fuses: up to
+    :data:`SCALAR_VERTICES_MAX` pairs on scalars, beyond on the halves' points as arrays.
     """
     k = (G.shape[1] + 1) // 2
-    x1 = _box_points(G[:, :k], _box_signs(k, True))
-    x2 = _box_points(G[:, k:], _box_signs(G.shape[1] - k, False))
+    s1, s2 = _box_signs(k, True), _box_signs(G.shape[1] - k, False)
+    if s1.shape[1] * s2.shape[1] <= SCALAR_VERTICES_MAX:
+        x1, x2 = _box_points_scalar(G[:, :k], s1), _box_points_scalar(G[:, k:], s2)
+        return _max_of([_norm_sq([a + b for a, b in zip(p, q)]) for p in x1 for q in x2])
+    x1 = _box_points(G[:, :k], s1)
+    x2 = _box_points(G[:, k:], s2)
     return jnp.max(sum((a[:, None] + b[None, :]) ** 2 for a, b in zip(x1, x2)))
+
+
+def _box_points_scalar(G, signs):
+    """The points ``G s`` for the columns ``s`` of ``signs`` (n, m), each a list of three scalars."""
+    g = [[G[c, i] for i in range(G.shape[1])] for c in range(3)]
+    return [[sum(x if si > 0 else -x for si, x in zip(s, g[c])) for c in range(3)] for s in signs.T]
+
+
+def _norm_sq(x):
+    return x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
+
+
+def _max_of(values):
+    """The largest of a list of scalars, as a balanced tree of pairwise maxima."""
+    while len(values) > 1:
+        values = [functools.reduce(jnp.maximum, values[i : i + 2]) for i in range(0, len(values), 2)]
+    return values[0]
 
 
 def _box_points(G, signs):
@@ -154,19 +182,24 @@ def _singular(J, r: int, n_wires: int):
     return s1, head[-1], jnp.where(jnp.isfinite(nz), nz, s1)
 
 
-def _chain_measures(robot: Robot, B, dq, mask):
-    """Every measure of :func:`config_measures` by the general chain formulas (any ``S``)."""
-    J = robot.J_xq(B, mask)  # (6, N); slack wires' columns exactly zero
-    dq = jnp.asarray(dq, J.dtype)
+def _chain_measures(robot: Robot, B, dq, masks):
+    """Every measure of :func:`config_measures` by the general chain formulas (any ``S``), for each
+    mask of ``masks`` (a list: ``None`` or (N,) 0/1): a list of dicts. Their Jacobians' blocks are
+    measured together (vmapped over the blocks): one program for every block."""
+    Js = jnp.stack([robot.J_xq(B, m) for m in masks])  # (M, 6, N); slack wires' columns exactly zero
+    blocks = jnp.concatenate([Js[:, :3], Js[:, 3:]])  # (2M, 3, N): each J_v, then each J_w
     r = _rank_cap(robot)
-    out = {}
-    for part, block in (("v", J[:3]), ("w", J[3:])):
-        s1, sr, snz = _singular(block, r, robot.n_wires)
-        out[f"kci_{part}"] = _div0(sr, s1)
-        out[f"sigma_min_{part}"] = sr
-        out[f"sigma_min_nz_{part}"] = snz
-    out["dp_max"] = _sqrt0(zonotope_max_sq(J[:3] * dq))
-    out["dw_max"] = _sqrt0(zonotope_max_sq(J[3:] * dq))
+    s1, sr, snz = jax.vmap(lambda b: _singular(b, r, robot.n_wires))(blocks)
+    bound = _sqrt0(jax.vmap(zonotope_max_sq)(blocks * jnp.asarray(dq, Js.dtype)))
+    out = []
+    for i in range(len(masks)):
+        d = {}
+        for part, k in (("v", i), ("w", len(masks) + i)):
+            d[f"kci_{part}"] = _div0(sr[k], s1[k])
+            d[f"sigma_min_{part}"] = sr[k]
+            d[f"sigma_min_nz_{part}"] = snz[k]
+        d["dp_max"], d["dw_max"] = bound[i], bound[len(masks) + i]
+        out.append(d)
     return out
 
 
@@ -209,7 +242,7 @@ def config_measures(robot: Robot, B, dq=DEFAULT_DQ, mask=None, general: bool = F
     if robot.n_segments == 1 and not general and np.ndim(dq) == 0:
         seg, theta_L, delta = _one_segment(robot, B)
         return pose_measures(seg, theta_L, delta, dq, mask)
-    return _chain_measures(robot, B, dq, mask)
+    return _chain_measures(robot, B, dq, [mask])[0]
 
 
 def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
@@ -230,8 +263,8 @@ def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
     else:
         bad = ~jnp.all(jnp.isfinite(B)) | ~jnp.all(jnp.isfinite(jnp.asarray(dq, B.dtype)))
         out = {"n_taut": jnp.where(bad, -1, jnp.sum(mask > 0.5)).astype(jnp.int32)}
-        for mode, m in (("full", None), ("reduced", mask)):
-            for k, v in _chain_measures(robot, B, dq, m).items():
+        for mode, measures in zip(("full", "reduced"), _chain_measures(robot, B, dq, [None, mask])):
+            for k, v in measures.items():
                 out[f"{k}_{mode}"] = v
     out["n_taut_segments"] = crossing
     return out
