@@ -498,7 +498,7 @@ def _jacobi_rows(rows, tol, rotation=True):
 
     eye = _rows(jnp.eye(k, dtype=dtype)) if rotation else []
     state = (_tuples(rows), _tuples(eye), jnp.zeros((), jnp.int32), jnp.ones((), dtype))
-    for _ in range(JACOBI_UNROLLED):  # the sweeps nearly every matrix needs, without the loop's selects
+    for _ in range(0 if rotation else JACOBI_UNROLLED):  # (the derivative's program stays small)
         state = sweep(state)
     W, Q, _, _ = jax.lax.while_loop(going, sweep, state)
     return W, (Q if rotation else None)

@@ -71,6 +71,7 @@ def _box_signs(n: int, first_positive: bool) -> np.ndarray:
 SCALAR_VERTICES_MAX = 256
 
 
+@jax.custom_jvp
 def _box_vertices_max_sq(G):
     """:func:`zonotope_max_sq` over every vertex of the box, one of each pair ``s, -s``.
 
@@ -78,15 +79,27 @@ def _box_vertices_max_sq(G):
     (``2^(k - 1)`` with ``s_1``'s first sign fixed, ``2^(N - k)``) are summed pairwise, ``|x_1 + x_2|^2``
     for every pair, which is every vertex of the box for about a fifth of the products of ``G`` with
     all ``2^(N - 1)`` sign vectors. Written elementwise, so that vmapped it fuses: up to
-    :data:`SCALAR_VERTICES_MAX` pairs on scalars, beyond on the halves' points as arrays.
+    :data:`SCALAR_VERTICES_MAX` pairs on scalars. Its derivative is that of the same sums as arrays
+    (:func:`_box_pairs_max_sq`), whose program stays small where the scalars' would not.
     """
     k = (G.shape[1] + 1) // 2
     s1, s2 = _box_signs(k, True), _box_signs(G.shape[1] - k, False)
-    if s1.shape[1] * s2.shape[1] <= SCALAR_VERTICES_MAX:
-        x1, x2 = _box_points_scalar(G[:, :k], s1), _box_points_scalar(G[:, k:], s2)
-        return _max_of([_norm_sq([a + b for a, b in zip(p, q)]) for p in x1 for q in x2])
-    x1 = _box_points(G[:, :k], s1)
-    x2 = _box_points(G[:, k:], s2)
+    if s1.shape[1] * s2.shape[1] > SCALAR_VERTICES_MAX:
+        return _box_pairs_max_sq(G)
+    x1, x2 = _box_points_scalar(G[:, :k], s1), _box_points_scalar(G[:, k:], s2)
+    return _max_of([_norm_sq([a + b for a, b in zip(p, q)]) for p in x1 for q in x2])
+
+
+@_box_vertices_max_sq.defjvp
+def _box_vertices_max_sq_jvp(primals, tangents):
+    return jax.jvp(_box_pairs_max_sq, primals, tangents)
+
+
+def _box_pairs_max_sq(G):
+    """:func:`_box_vertices_max_sq` with each half's points as (m,) arrays."""
+    k = (G.shape[1] + 1) // 2
+    x1 = _box_points(G[:, :k], _box_signs(k, True))
+    x2 = _box_points(G[:, k:], _box_signs(G.shape[1] - k, False))
     return jnp.max(sum((a[:, None] + b[None, :]) ** 2 for a, b in zip(x1, x2)))
 
 
