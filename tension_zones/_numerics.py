@@ -498,7 +498,7 @@ def _jacobi_rows(rows, tol, rotation=True):
 
     eye = _rows(jnp.eye(k, dtype=dtype)) if rotation else []
     state = (_tuples(rows), _tuples(eye), jnp.zeros((), jnp.int32), jnp.ones((), dtype))
-    for _ in range(0 if rotation else JACOBI_UNROLLED):  # (the derivative's program stays small)
+    for _ in range(0 if rotation else JACOBI_UNROLLED):  # values only: the derivative's program stays small
         state = sweep(state)
     W, Q, _, _ = jax.lax.while_loop(going, sweep, state)
     return W, (Q if rotation else None)
@@ -534,8 +534,7 @@ def _scaled_jacobi(R, rotation=True):
     step, not ``k n``."""
     c = jnp.max(jnp.abs(R))
     c = jnp.where(c > 0, c, 1.0)
-    rows = [[R[i, j] / c for j in range(R.shape[1])] for i in range(R.shape[0])]
-    W, Q = _jacobi_rows(_gram_schmidt_rows(rows), R.shape[1] * eps_of(R), rotation)  # tol: a dot's rounding
+    W, Q = _jacobi_rows(_gram_schmidt_rows(_rows(R / c)), R.shape[1] * eps_of(R), rotation)  # tol: a dot's rounding
     return (jnp.asarray(Q) if rotation else None), jnp.stack([jnp.sqrt(_dot(w, w)) for w in W]), c
 
 
