@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import eps_of, singular_values
+from .._numerics import _dot, eps_of, singular_values
 from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
@@ -87,7 +87,8 @@ def _box_vertices_max_sq(G):
     if s1.shape[1] * s2.shape[1] > SCALAR_VERTICES_MAX:
         return _box_pairs_max_sq(G)
     x1, x2 = _box_points_scalar(G[:, :k], s1), _box_points_scalar(G[:, k:], s2)
-    return _max_of([_norm_sq([a + b for a, b in zip(p, q)]) for p in x1 for q in x2])
+    vertices = ([a + b for a, b in zip(p, q)] for p in x1 for q in x2)
+    return _max_of([_dot(x, x) for x in vertices])
 
 
 @_box_vertices_max_sq.defjvp
@@ -107,10 +108,6 @@ def _box_points_scalar(G, signs):
     """The points ``G s`` for the columns ``s`` of ``signs`` (n, m), each a list of three scalars."""
     g = [[G[c, i] for i in range(G.shape[1])] for c in range(3)]
     return [[sum(x if si > 0 else -x for si, x in zip(s, g[c])) for c in range(3)] for s in signs.T]
-
-
-def _norm_sq(x):
-    return x[0] * x[0] + x[1] * x[1] + x[2] * x[2]
 
 
 def _max_of(values):
