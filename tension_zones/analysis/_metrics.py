@@ -55,11 +55,19 @@ MODES = ("full", "reduced")
 # --------------------------------------------------------------------------------------------
 # Guarded elementary functions (double-where: finite values *and* gradients at 0)
 # --------------------------------------------------------------------------------------------
+@jax.custom_jvp
 def _sqrt0(x):
     """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0; NaN for NaN (``~(x <= 0)``, not
     ``x > 0``: the same for numbers, and a NaN stays NaN instead of becoming a plausible 0)."""
+    return jnp.sqrt(jnp.maximum(x, 0.0))
+
+
+@_sqrt0.defjvp
+def _sqrt0_jvp(primals, tangents):
+    (x,), (t,) = primals, tangents
     pos = ~(x <= 0)
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+    y = jnp.sqrt(jnp.where(pos, x, 1.0))
+    return jnp.where(pos, y, 0.0), jnp.where(pos, t / (2.0 * y), 0.0)
 
 
 def _div0(a, b):
