@@ -230,11 +230,21 @@ def vee(S):
     return 0.5 * jnp.array([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]])
 
 
-def rotvec_to_matrix(w):
-    """Rodrigues' formula, smooth at w = 0."""
-    t2 = jnp.dot(w, w)
-    K = skew(w)
-    return jnp.eye(3, dtype=K.dtype) + sinc_sq(t2) * K + versinc_sq(t2) * (K @ K)
+def rotvec_to_matrix(w, t2=None):
+    """Rodrigues' formula ``I + sinc K + versinc K^2`` (``K = skew(w)``), smooth at ``w = 0``, written
+    entry by entry (``K^2 = w w^T - |w|^2 I``): vmapped it fuses, no tiny matrix products. ``t2``:
+    ``|w|^2``, where the caller has it (the compiler then shares its sine and cosine with the caller's)."""
+    x, y, z = w[0], w[1], w[2]
+    t2 = x * x + y * y + z * z if t2 is None else t2
+    s, c = sinc_sq(t2), versinc_sq(t2)
+    xy, xz, yz = c * x * y, c * x * z, c * y * z
+    return jnp.stack(
+        [
+            jnp.stack([1.0 - c * (y * y + z * z), xy - s * z, xz + s * y]),
+            jnp.stack([xy + s * z, 1.0 - c * (x * x + z * z), yz - s * x]),
+            jnp.stack([xz - s * y, yz + s * x, 1.0 - c * (x * x + y * y)]),
+        ]
+    )
 
 
 # --------------------------------------------------------------------------------------------

@@ -173,7 +173,7 @@ def segment_pose(L, b):
     phi2 = u * u + v * v
     k = L * versinc_sq(phi2)
     p = jnp.stack([k * u, k * v, L * sinc_sq(phi2)])
-    R = rotvec_to_matrix(jnp.stack([-v, u, jnp.zeros_like(u)]))
+    R = rotvec_to_matrix(jnp.stack([-v, u, jnp.zeros_like(u)]), phi2)
     return p, R
 
 
