@@ -33,7 +33,7 @@ import numpy as np
 
 from .._numerics import masked_pinv, pinv_tall2, skew, straight_through
 from ._design import Design, MissingDesignKeyWarning, missing_physical_keys, read_json
-from ._kinematics import b_to_psi, moment_arms, segment_J_xb, segment_pose
+from ._kinematics import moment_arms, segment_J_xb, segment_pose
 from ._zones import BOUNDARY_TOL, TEMPERATURE
 
 
@@ -573,6 +573,8 @@ def _routing_entry(value, j: int, n: int, key: str) -> np.ndarray:
 
 def _unit_directions(B):
     """Each segment's 'bend further' direction (S, 2): ``b_j/|b_j|``, ``(1, 0)`` at ``b_j = 0``
-    (the ``delta = 0`` convention of ``b_to_psi``)."""
-    _, delta = jax.vmap(b_to_psi)(B)
-    return jnp.stack([jnp.cos(delta), -jnp.sin(delta)], axis=1)
+    (the ``delta = 0`` convention of ``b_to_psi``), with zero gradient there."""
+    phi2 = jnp.sum(B * B, axis=1, keepdims=True)
+    nz = phi2 > 0
+    d = B / jnp.sqrt(jnp.where(nz, phi2, 1.0))  # double where: finite gradients at b_j = 0
+    return jnp.where(nz, d, jnp.asarray([1.0, 0.0], B.dtype))
