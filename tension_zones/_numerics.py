@@ -404,13 +404,49 @@ def _masked_pinv_batched(A, mask):
 @_masked_pinv_batched.def_vmap
 def _masked_pinv_rule(axis_size, in_batched, A, mask):
     a_batched, m_batched = in_batched
-    n = A.shape[-2]
-    if a_batched or not m_batched or axis_size < MASK_TABLE_SHARE * 2**n:
+    if a_batched or not m_batched or not uses_mask_table(A.shape[-2], axis_size):
         return jax.vmap(_masked_pinv, in_axes=(0 if a_batched else None, 0 if m_batched else None))(A, mask), True
-    every = jnp.asarray(_mask_bits(n), A.dtype)  # (2^n, n): mask i has bit k of i at wire k
-    table = jax.vmap(_masked_pinv, in_axes=(None, 0))(A, every)
-    index = jnp.sum(jnp.where(mask > 0.5, 2 ** jnp.arange(n), 0), axis=1)
-    return table[index], True
+    index = jnp.sum(jnp.where(mask > 0.5, 2 ** jnp.arange(A.shape[-2]), 0), axis=1)
+    return _table_for(A)[index], True
+
+
+def uses_mask_table(n_rows: int, batch: int) -> bool:
+    """Whether :func:`masked_pinv` vmapped over ``batch`` masks of one (n_rows, n) matrix takes them
+    from a table of every mask (:data:`MASK_TABLE_SHARE`)."""
+    return batch >= MASK_TABLE_SHARE * 2**n_rows
+
+
+def mask_table(A):
+    """Every mask's :func:`masked_pinv` of ``A`` (N, n): (2^N, n, N), entry ``i`` for the mask whose
+    wire ``k`` is bit ``k`` of ``i``."""
+    every = jnp.asarray(_mask_bits(A.shape[-2]), A.dtype)
+    return jax.vmap(_masked_pinv, in_axes=(None, 0))(A, every)
+
+
+_SHARED_TABLES: list = []
+
+
+@contextlib.contextmanager
+def shared_mask_table(A, table):
+    """Inside this context, functions *traced* here that vmap :func:`masked_pinv` over masks of a
+    matrix equal to ``A`` take ``table`` (:func:`mask_table` of ``A``, made once, e.g. for a whole
+    sweep) instead of making the table in every call. Checked where it runs: a matrix that differs
+    from ``A`` in any entry makes its own table."""
+    _SHARED_TABLES.append((A, table))
+    try:
+        yield
+    finally:
+        _SHARED_TABLES.pop()
+
+
+def _table_for(A):
+    """The shared table of the innermost :func:`shared_mask_table` of ``A``'s shape and dtype where
+    its matrix equals ``A``, else ``A``'s own."""
+    shared = [(ref, t) for ref, t in _SHARED_TABLES if ref.shape == A.shape and ref.dtype == A.dtype]
+    if not shared:
+        return mask_table(A)
+    ref, table = shared[-1]
+    return jax.lax.cond(jnp.all(A == ref), lambda: table, lambda: mask_table(A))
 
 
 @functools.cache

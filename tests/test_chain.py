@@ -13,7 +13,7 @@ from reference_chain import compliance as compliance_reference
 from reference_chain import measures
 
 import tension_zones as tz
-from tension_zones._numerics import MASK_TABLE_SHARE, masked_pinv, singular_values
+from tension_zones._numerics import MASK_TABLE_SHARE, mask_table, masked_pinv, shared_mask_table, singular_values
 from tension_zones.analysis import config_measures, config_metrics, zonotope_max_sq
 from tension_zones.analysis._chain import BOX_VERTICES_MAX, _face_edges_max_sq
 from tension_zones.model import Robot
@@ -231,6 +231,26 @@ def test_the_pseudo_inverse_of_the_kept_rows_has_the_formulas_derivatives():
         for E in np.eye(20).reshape(20, 5, 4)[:6]
     ]
     np.testing.assert_allclose(np.ravel(grad)[:6], fd, rtol=1e-6)
+
+
+def test_a_shared_table_is_taken_only_for_its_own_matrix():
+    """Inside ``shared_mask_table(A, table)`` a batch of masks of ``A`` is looked up in ``table`` (made
+    once, e.g. per sweep): a deliberately wrong table shows it is the one used. Any other matrix of
+    the same shape, checked where it runs, gets its own pseudo-inverses."""
+    rng = np.random.default_rng(5)
+    A, other = (jnp.asarray(rng.normal(size=(4, 3))) for _ in range(2))
+    masks = jnp.asarray(rng.integers(0, 2, (MASK_TABLE_SHARE * 2**4, 4)), float)
+    batched = jax.vmap(masked_pinv, in_axes=(None, 0))
+
+    @jax.jit
+    def shared(ref, table, M):
+        with shared_mask_table(ref, table):
+            return batched(M, masks)
+
+    wrong = jnp.full_like(mask_table(A), 7.0)
+    np.testing.assert_array_equal(shared(A, wrong, A), 7.0)
+    np.testing.assert_array_equal(shared(A, mask_table(A), A), batched(A, masks))
+    np.testing.assert_array_equal(shared(A, wrong, other), batched(other, masks))
 
 
 def test_new_values_never_recompile():

@@ -183,7 +183,7 @@ def test_a_robot_sweep_takes_the_chunk_its_function_asks_for(monkeypatch):
 
     sizes, run = [], _sweep._eval_chunk_jit
     monkeypatch.setattr(
-        _sweep, "_eval_chunk_jit", lambda fn, d, poses, a: sizes.append(poses[0].shape[0]) or run(fn, d, poses, a)
+        _sweep, "_eval_chunk_jit", lambda fn, d, poses, *a: sizes.append(poses[0].shape[0]) or run(fn, d, poses, *a)
     )
     B = config_samples(2, 300, 60.0)
     res = sweep_configs(config_metrics, robot, B, 0.4, quiet=True)

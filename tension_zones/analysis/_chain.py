@@ -282,8 +282,9 @@ def config_metrics(robot: Robot, B, dq=DEFAULT_DQ, general: bool = False):
 
 #: Configurations per chunk of a sweep of :func:`config_metrics` (:func:`~._sweep.sweep_configs`' default)
 #: up to :data:`BOX_VERTICES_MAX` wires: its working set is then a few kilobytes per configuration, so
-#: a chunk larger than a loaded sweep's spreads each call's fixed costs (the table of every mask's
-#: reduced pseudo-inverse: :func:`~tension_zones._numerics.masked_pinv`) over more configurations.
+#: a chunk larger than a loaded sweep's spreads each call's fixed costs (the full Jacobian's
+#: pseudo-inverse, the check of the shared table of every mask's reduced one:
+#: :func:`~tension_zones._numerics.shared_mask_table`) over more configurations.
 #: Beyond, the face edges' pair terms take :data:`~._sweep.ROBOT_CHUNK`.
 METRICS_CHUNK = 1 << 13
 

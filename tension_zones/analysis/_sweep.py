@@ -24,6 +24,7 @@ flat list of poses (:func:`sweep_poses`):
 from __future__ import annotations
 
 import collections
+import contextlib
 import functools
 import math
 from collections.abc import Callable, Sequence
@@ -34,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from .._numerics import mask_table, shared_mask_table, uses_mask_table
 from ..model._design import Design
 from ..model._robot import Robot
 
@@ -87,15 +89,26 @@ def grid_size(stop: float, step: float, start: float = 0.0) -> int:
     return int(math.floor((stop - start) / step + 1e-9)) + 1
 
 
-def _eval_chunk(fn, subject, poses, args):
-    """``fn(subject, *pose, *args)`` vmapped over a chunk's poses (a tuple of arrays, one row a pose)."""
-    out = jax.vmap(lambda *pose: fn(subject, *pose, *args))(*poses)
+def _eval_chunk(fn, subject, poses, args, tables=None):
+    """``fn(subject, *pose, *args)`` vmapped over a chunk's poses (a tuple of arrays, one row a pose);
+    ``tables``: a robot's routing matrix and its :func:`~tension_zones._numerics.mask_table`, made once
+    for the whole sweep (:func:`_robot_tables`)."""
+    with shared_mask_table(*tables) if tables is not None else contextlib.nullcontext():
+        out = jax.vmap(lambda *pose: fn(subject, *pose, *args))(*poses)
     if not isinstance(out, dict):
         raise TypeError(f"a swept function must return a dict of arrays, got {type(out).__name__}")
     return out
 
 
 _eval_chunk_jit = jax.jit(_eval_chunk, static_argnums=0)
+
+
+@jax.jit
+def _robot_tables(robot: Robot):
+    """A robot's ``J_qB`` and the pseudo-inverse of its rows for every mask of taut wires: what a
+    chunk's reduced Jacobians are looked up in (``Robot.J_xq``), made once per sweep."""
+    A = robot.J_qB()
+    return A, mask_table(A)
 
 
 def _grid_index(start, chunk, n_poses):
@@ -184,6 +197,8 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
     chunk = int(chunk_size) * n_dev  # every device always gets chunk_size poses (see module doc)
     batch, replicated = NamedSharding(mesh, PartitionSpec("poses")), NamedSharding(mesh, PartitionSpec())
     design_d = jax.device_put(design, replicated)
+    share = isinstance(design, Robot) and grid is None and uses_mask_table(design.n_wires, chunk)
+    tables = _robot_tables(design_d) if share else None
     args_d = jax.device_put(jax.tree_util.tree_map(np.asarray, tuple(args)), replicated)
 
     if grid is not None and max(x.size for x in grid) > chunk:
@@ -204,7 +219,7 @@ def _run(fn, design, n_poses, poses_of, args, chunk_size, devices, quiet, keep, 
         poses = [np.asarray(x, dt) for x in poses_of(start, stop)]
         if stop - start < chunk:  # pad with the first pose: one compiled shape for every chunk
             poses = [np.concatenate([x, np.repeat(x[:1], chunk - (stop - start), axis=0)]) for x in poses]
-        res = _eval_chunk_jit(fn, design_d, tuple(jax.device_put(x, batch) for x in poses), args_d)
+        res = _eval_chunk_jit(fn, design_d, tuple(jax.device_put(x, batch) for x in poses), args_d, tables)
         return start, stop, res
 
     results: dict[str, np.ndarray] = {}
