@@ -393,12 +393,14 @@ def test_compliance_gradients_are_finite_at_the_straight_configuration_and_nan_g
 
 
 def test_a_robots_sweep_compiles_once_per_structure():
-    """Two robots of the same wire counts with other numbers, and other configurations: one program."""
+    """Two robots of the same wire counts with other numbers, and other configurations: one program,
+    and one for the table of every mask's reduced pseudo-inverse the chunks share."""
     from tension_zones.analysis import compiled_chunk_count, config_samples, sweep_configs
 
     a = Robot(SEGMENTS[:2])
     b = Robot([s.replace(pitch_radius=s.pitch_radius * 1.2, length=s.length * 0.9) for s in SEGMENTS[:2]])
-    sweep_configs(config_metrics, a, config_samples(2, 100, 60.0), 0.4, chunk_size=64, quiet=True)
+    chunk = MASK_TABLE_SHARE * 2**a.n_wires  # large enough for the shared table
+    sweep_configs(config_metrics, a, config_samples(2, 100, 60.0), 0.4, chunk_size=chunk, quiet=True)
     before = compiled_chunk_count()
-    out = sweep_configs(config_metrics, b, config_samples(2, 150, 80.0, start=500), 0.7, chunk_size=64, quiet=True)
+    out = sweep_configs(config_metrics, b, config_samples(2, 150, 80.0, start=500), 0.7, chunk_size=chunk, quiet=True)
     assert compiled_chunk_count() == before and out["dp_max_reduced"].shape == (150,)

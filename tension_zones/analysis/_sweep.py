@@ -145,8 +145,8 @@ _eval_grid_chunk_jit = jax.jit(_eval_grid_chunk, static_argnums=(0, 1))
 def compiled_chunk_count() -> int:
     """How many chunk programs have been compiled so far (one per function, wire count, chunk size
     and kind: flat poses, a grid whose poses are generated on the device, or per-design statistics
-    of :func:`sweep_designs`, also one per set of statistics)."""
-    jits: list[Any] = [_eval_chunk_jit, _eval_grid_chunk_jit, _designs_chunk_jit]  # (a jit's own count)
+    of :func:`sweep_designs`, also one per set of statistics), with a robot's shared table's."""
+    jits: list[Any] = [_eval_chunk_jit, _eval_grid_chunk_jit, _designs_chunk_jit, _robot_tables]  # (their own counts)
     return sum(f._cache_size() for f in jits)
 
 
