@@ -57,15 +57,15 @@ MODES = ("full", "reduced")
 # --------------------------------------------------------------------------------------------
 @jax.custom_jvp
 def _sqrt0(x):
-    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0; NaN for NaN (``~(x <= 0)``, not
-    ``x > 0``: the same for numbers, and a NaN stays NaN instead of becoming a plausible 0)."""
+    """sqrt(max(x, 0)) with a zero (not infinite) gradient at 0; NaN for NaN. The value reads ``x``
+    once: XLA recomputes a fused producer of ``x`` (a bound's vertex tree) in every consumer."""
     return jnp.sqrt(jnp.maximum(x, 0.0))
 
 
 @_sqrt0.defjvp
 def _sqrt0_jvp(primals, tangents):
     (x,), (t,) = primals, tangents
-    pos = ~(x <= 0)
+    pos = ~(x <= 0)  # not x > 0: a NaN stays NaN instead of becoming a plausible 0
     y = jnp.sqrt(jnp.where(pos, x, 1.0))
     return jnp.where(pos, y, 0.0), jnp.where(pos, t / (2.0 * y), 0.0)
 
