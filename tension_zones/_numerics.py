@@ -486,7 +486,7 @@ JACOBI_UNROLLED = 4
 JACOBI_MAX_ROWS = 3
 
 
-def _dot(u, v):
+def dot_lists(u, v):
     """Dot product of two vectors given as lists of scalars."""
     return sum(x * y for x, y in zip(u, v))
 
@@ -501,11 +501,11 @@ def _gram_schmidt_rows(rows):
     r = [list(x) for x in rows]
     L = [[zero] * k for _ in range(k)]
     for i in range(k):
-        size = jnp.sqrt(_dot(r[i], r[i]))
+        size = jnp.sqrt(dot_lists(r[i], r[i]))
         L[i][i] = size
         q = [x / jnp.where(size > 0, size, 1.0) for x in r[i]]
         for j in range(i + 1, k):
-            L[j][i] = _dot(q, r[j])
+            L[j][i] = dot_lists(q, r[j])
             r[j] = [x - L[j][i] * y for x, y in zip(r[j], q)]
     return L
 
@@ -520,7 +520,7 @@ def _jacobi_rows(rows, tol, rotation=True):
     k = len(rows)
     dtype = rows[0][0].dtype
     pairs = [(i, j) for i in range(k) for j in range(i + 1, k)]
-    floor = tol * sum(_dot(x, x) for x in rows)  # rows of rounding's size (a zero singular value) point anywhere
+    floor = tol * sum(dot_lists(x, x) for x in rows)  # rows of rounding's size (a zero singular value) point anywhere
 
     def rotate(u, v, cs, sn):
         return [cs * x - sn * y for x, y in zip(u, v)], [sn * x + cs * y for x, y in zip(u, v)]
@@ -529,7 +529,7 @@ def _jacobi_rows(rows, tol, rotation=True):
         r, q, n, _ = state
         r, q, worst = [list(x) for x in r], [list(x) for x in q], jnp.zeros((), dtype)
         for i, j in pairs:
-            a, b, c = _dot(r[i], r[i]), _dot(r[j], r[j]), _dot(r[i], r[j])
+            a, b, c = dot_lists(r[i], r[i]), dot_lists(r[j], r[j]), dot_lists(r[i], r[j])
             size = jnp.maximum(jnp.sqrt(a) * jnp.sqrt(b), floor)
             worst = jnp.maximum(worst, jnp.abs(c) / jnp.where(size > 0, size, 1.0))
             t = _jacobi_tangent(a, b, c)
@@ -581,7 +581,7 @@ def _scaled_jacobi(R, rotation=True):
     c = jnp.max(jnp.abs(R))
     c = jnp.where(c > 0, c, 1.0)
     W, Q = _jacobi_rows(_gram_schmidt_rows(_rows(R / c)), R.shape[1] * eps_of(R), rotation)  # tol: a dot's rounding
-    return (jnp.asarray(Q) if rotation else None), jnp.stack([jnp.sqrt(_dot(w, w)) for w in W]), c
+    return (jnp.asarray(Q) if rotation else None), jnp.stack([jnp.sqrt(dot_lists(w, w)) for w in W]), c
 
 
 @jax.custom_jvp

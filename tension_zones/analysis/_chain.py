@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._numerics import _dot, eps_of, singular_values
+from .._numerics import dot_lists, eps_of, singular_values
 from ..model._kinematics import b_to_psi
 from ..model._robot import Robot
 from ._metrics import DEFAULT_DQ, PARALLEL_TOL, _div0, _sqrt0, pose_measures, pose_metrics
@@ -88,7 +88,7 @@ def _box_vertices_max_sq(G):
         return _box_pairs_max_sq(G)
     x1, x2 = _box_points_scalar(G[:, :k], s1), _box_points_scalar(G[:, k:], s2)
     vertices = ([a + b for a, b in zip(p, q)] for p in x1 for q in x2)
-    return _max_of([_dot(x, x) for x in vertices])
+    return _max_of([dot_lists(x, x) for x in vertices])
 
 
 @_box_vertices_max_sq.defjvp
